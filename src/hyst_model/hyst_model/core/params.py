@@ -1,0 +1,138 @@
+"""MBW parameters with explicit SI scaling, and the thesis's published parameter sets.
+
+Bounds for identification live in one place: :data:`BOUNDS` (thesis Table 3.1 for the six shape parameters,
+plus δ1, δ2 in (0, 1]).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from .mbw import PARAM_NAMES, mbw_rest_state, mbw_simulate
+
+__all__ = ["MBWParams", "BOUNDS", "THESIS_FIG37", "THESIS_FIG38", "THESIS_TABLE41", "from_continuous", "pea_default"]
+
+#: Identification bounds per recursion parameter. ζ1..α2 from thesis Table 3.1; α1's published upper bound
+#: (0.9) is kept although Remark 4.1 wants α1 < -|ψ1| for control; δ1, δ2 from the discretisation (≈ 1).
+BOUNDS: dict[str, tuple[float, float]] = {
+    "zeta1": (1e-5, 0.9),
+    "zeta2": (1e-5, 1.0),
+    "psi1": (1e-5, 0.95),
+    "psi2": (-1.0, 1.0),
+    "alpha1": (-1e-5, 0.9),
+    "alpha2": (-1.0, 1.0),
+    "delta1": (0.5, 1.0),
+    "delta2": (0.5, 1.0),
+}
+
+
+@dataclass(frozen=True)
+class MBWParams:
+    """Parameters of the Modified Bouc-Wen model (3.21) and its mapping to SI units.
+
+    Attributes
+    ----------
+    zeta1, zeta2, psi1, psi2, alpha1, alpha2, delta1, delta2 : float
+        Thesis symbols, ν convention ν_k = u_k − δ2·u_{k−1} (see :mod:`hyst_model.core.mbw`).
+    u_scale : float
+        Volts per model input unit: ``u_model = u / u_scale``.
+    y_scale : float
+        Metres per model output unit.
+    offset : float
+        Output offset in metres (a real sensor reads nonzero at 0 V): ``y = y_scale * y_model + offset``.
+    """
+
+    zeta1: float
+    zeta2: float
+    psi1: float
+    psi2: float
+    alpha1: float
+    alpha2: float
+    delta1: float
+    delta2: float
+    u_scale: float = 1.0
+    y_scale: float = 1.0
+    offset: float = 0.0
+
+    @property
+    def vector(self) -> np.ndarray:
+        """Packed recursion parameters in :data:`PARAM_NAMES` order."""
+        return np.array([getattr(self, n) for n in PARAM_NAMES], dtype=np.float64)
+
+    @classmethod
+    def from_vector(cls, p, **scaling) -> "MBWParams":
+        """Build from a packed vector plus ``u_scale``/``y_scale``/``offset`` keywords."""
+        return cls(**dict(zip(PARAM_NAMES, map(float, p))), **scaling)
+
+    def to_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "MBWParams":
+        fields = set(cls.__dataclass_fields__)
+        return cls(**{k: float(v) for k, v in d.items() if k in fields})
+
+    def replace(self, **kw) -> "MBWParams":
+        return replace(self, **kw)
+
+    @property
+    def is_bw(self) -> bool:
+        """True when the rate terms vanish, i.e. the model is the discrete BW (3.19)."""
+        return self.zeta2 == 0.0 and self.psi2 == 0.0 and self.alpha2 == 0.0
+
+    @property
+    def control_positive(self) -> bool:
+        """Remark 4.1: α1 < −|ψ1| and α2 < −|ψ2| keep μ positive so ν takes the sign of the numerator."""
+        return self.alpha1 < -abs(self.psi1) and self.alpha2 < -abs(self.psi2)
+
+    def simulate(self, u: np.ndarray, *, from_rest: bool = True) -> np.ndarray:
+        """Simulate in SI units: input volts, output metres.
+
+        Parameters
+        ----------
+        u : array_like
+            Applied voltage per sample (V).
+        from_rest : bool
+            Start in the state reached after holding ``u[0]`` for a long time (default); otherwise y_{-1}=0.
+        """
+        un = np.ascontiguousarray(np.asarray(u, dtype=np.float64) / self.u_scale)
+        p = self.vector
+        y0 = mbw_rest_state(p, un[0]) if (from_rest and un.size) else 0.0
+        return self.y_scale * mbw_simulate(p, un, y0, np.nan) + self.offset
+
+
+def from_continuous(xi: float, phi: float, gamma: float, dt: float, delta1: float = 1.0,
+                    delta2: float = 1.0) -> MBWParams:
+    """Discrete BW (3.19) parameters from the continuous special-case BW (3.9).
+
+    (3.17)–(3.18) set ζ = Δt·ξ, ψ = Δt·φ, α = Δt·γ with ν_k = (u_k − δ2·u_{k−1})/Δt. Because (3.9) is
+    homogeneous of degree one in u̇, absorbing Δt into ν (hyst's convention, ν_k = u_k − δ2·u_{k−1}) cancels it:
+    ζ = ξ, ψ = φ, α = γ — which is why the thesis quotes ζ = ξ, ψ = φ, α = γ for Fig. 3.7. ``dt`` only has to be
+    positive; it is part of the signature so callers state the sampling period they discretise at.
+    """
+    if not dt > 0:
+        raise ValueError("dt must be positive")
+    return MBWParams(xi, 0.0, phi, 0.0, gamma, 0.0, delta1, delta2)
+
+
+#: Fig. 3.7 setting: ζ=ξ=0.5, ψ=φ=0.02, α=γ=−0.05, δ1=δ2=0.9998, Δt = 0.5 ms.
+THESIS_FIG37 = MBWParams(0.5, 0.0, 0.02, 0.0, -0.05, 0.0, 0.9998, 0.9998)
+#: Fig. 3.8 MBW setting: ζ1=0.4346, ζ2=1e-6, ψ1=0.0345, ψ2=0.09, α1=−0.05, α2=−0.09, δ1=δ2=0.9995.
+THESIS_FIG38 = MBWParams(0.4346, 1e-6, 0.0345, 0.09, -0.05, -0.09, 0.9995, 0.9995)
+#: Table 4.1: EPSO-identified MBW of the PEA stage used by DPPC.
+THESIS_TABLE41 = MBWParams(0.4029, 6.7438e-06, 0.0345, 0.0149, -0.0394, -0.0245, 0.9620, 0.9511)
+
+
+def pea_default() -> MBWParams:
+    """The embedded default stage: thesis Table 4.1 on a 0–150 V PEA input, about 30 µm full stroke.
+
+    The thesis does not state its input scale (../shared/thesis/README.md); hyst maps 150 V to 10 model units
+    (``u_scale`` = 15 V), the amplitude of the thesis's own sine tests, and chooses ``y_scale`` so that a
+    150 V held at rest reads 30 µm (a 1 Hz 0–150 V sweep spans 30 µm too).
+    """
+    return _PEA_DEFAULT
+
+
+_PEA_DEFAULT = MBWParams(0.4029, 6.7438e-06, 0.0345, 0.0149, -0.0394, -0.0245, 0.9620, 0.9511,
+                         u_scale=15.0, y_scale=5.42e-6, offset=0.0)

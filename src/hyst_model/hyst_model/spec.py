@@ -1,0 +1,50 @@
+"""Build a model from its spec: a base model name, a list of effect names and fixed configuration.
+
+This is the single place where a params file (``model.base``, ``model.effects``, ``model.<param>``) becomes a
+:class:`~hyst_model.model.Model`. Base models are registered in :data:`hyst_model.models.BASE_MODELS`, effects in
+:data:`hyst_model.effects.EFFECTS` (user effects join through ``--effect-module``).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+from .errors import EffectError, ParamsError
+from .model import Model
+
+__all__ = ["build_model"]
+
+
+def build_model(base: str, effects: Sequence[str] = (), config: Mapping[str, object] | None = None) -> Model:
+    """Return the model ``base`` (+ ``effects`` in order) with fixed configuration ``config``.
+
+    Parameters
+    ----------
+    base : str
+        Base model name, e.g. ``"mbw"`` or ``"bw"``.
+    effects : sequence of str
+        Effect names, e.g. ``("creep", "delay")``; empty for the base model alone.
+    config : mapping
+        Non-fitted configuration (``u_scale``, ``y_scale``, ``dt``, ...), as written by :meth:`Model.config`.
+
+    Raises
+    ------
+    ParamsError
+        Unknown base model.
+    EffectError
+        Unknown effect.
+    """
+    from .models import BASE_MODELS  # late: models import the core, not the other way round
+
+    config = dict(config or {})
+    try:
+        factory = BASE_MODELS[base]
+    except KeyError:
+        raise ParamsError(f"unknown base model {base!r}; choose one of {', '.join(sorted(BASE_MODELS))}") from None
+    model = factory(config)  # each factory picks the keys it needs and ignores the rest
+    if not effects:
+        return model
+    from .effects import compose  # noqa: PLC0415
+    try:
+        return compose(model, list(effects), config)
+    except KeyError as err:
+        raise EffectError(f"unknown effect {err.args[0]!r}") from None
