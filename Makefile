@@ -30,7 +30,8 @@ demo: $(STAMP)
 	@$(VENV)/bin/hyst demo
 
 test: $(STAMP)
-	@$(PY) -m pytest
+	@PATH="$(VENV)/bin:$$PATH" fastdds shm clean >/dev/null 2>&1 || true
+	@$(PY) -m pytest $(PYTEST_ARGS)
 
 bench: $(STAMP)
 	@$(PY) bench/run_all.py
