@@ -98,6 +98,7 @@ class MBWModel(Model):
             raise ValueError("u_scale and y_scale must be positive")
         self.u_scale = float(u_scale)
         self.y_scale = float(y_scale)
+        self.offset_bound = float(offset_bound)
         self.rate = bool(rate)
         self.name = "mbw" if rate else "bw"
         defaults = dict(zip(PARAM_NAMES, (0.4, 1e-3, 0.03, 0.0, -0.04, 0.0, 0.98, 0.98)))
@@ -109,6 +110,8 @@ class MBWModel(Model):
             ps.append(Param(n, defaults[n], lo, hi, "", f"MBW {n} (3.21)"))
         ps.append(Param("offset", 0.0, -offset_bound, offset_bound, "m", "sensor reading at rest at 0 V"))
         self._params = tuple(ps)
+        # columns of the 8 recursion sensitivities that are fitted parameters here (BW drops the rate terms)
+        self._cols = np.array([PARAM_NAMES.index(p.name) for p in ps if p.name in PARAM_NAMES])
 
     def params(self) -> tuple[Param, ...]:
         return self._params
@@ -123,5 +126,24 @@ class MBWModel(Model):
     def simulate(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray) -> np.ndarray:
         return self.to_params(theta).simulate(u)
 
+    def simulate_jac(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Output (m) and its exact Jacobian d y / d theta, shape (n, len(theta)), from rest.
+
+        Uses the forward sensitivities of :mod:`hyst_model.core.sensitivity` (about two simulations' cost).
+        """
+        from .core.sensitivity import mbw_rest_state_sens, mbw_simulate_sens
+        p = self.to_params(theta)
+        pv = p.vector
+        un = np.ascontiguousarray(np.asarray(u, dtype=np.float64) / self.u_scale)
+        if un.size:
+            y0, S0 = mbw_rest_state_sens(pv, un[0])
+        else:
+            y0, S0 = 0.0, np.zeros(8)
+        ym, S = mbw_simulate_sens(pv, un, y0, S0)
+        J = np.empty((un.size, len(self._params)))
+        J[:, :-1] = self.y_scale * S[:, self._cols]
+        J[:, -1] = 1.0
+        return self.y_scale * ym + p.offset, J
+
     def config(self) -> dict[str, float | str]:
-        return {"u_scale": self.u_scale, "y_scale": self.y_scale}
+        return {"u_scale": self.u_scale, "y_scale": self.y_scale, "offset_bound": self.offset_bound}

@@ -1,0 +1,24 @@
+"""hyst_control: DPPC, DMRAC, PID and open-loop controllers for hysteretic actuators, references, the closed loop.
+
+Numerical core (no rclpy): :mod:`.base`, :mod:`.dppc`, :mod:`.dmrac`, :mod:`.pid`, :mod:`.limits`,
+:mod:`.reference`, :mod:`.loop`. Thin nodes: ``controller_node``, ``reference_node``, ``composed``.
+"""
+from .base import BaseController, Controller, hand_over
+from .dmrac import DMRAC, TABLE53, DMRACGains
+from .dppc import DPPC, THESIS_TABLE42, DPPCGains
+from .errors import ConfigError, ControlError, LoopError, ReferenceError_
+from .limits import GMA_LIMITS, PEA_LIMITS, CommandLimits
+from .loop import ALGORITHMS, LoopResult, make_controller, mismatched, run_closed_loop
+from .pid import PID, OpenLoop, PIDGains
+from .reference import TABLE_REFERENCES, Reference, parse_reference
+
+__all__ = [
+    "BaseController", "Controller", "hand_over",
+    "DMRAC", "DMRACGains", "TABLE53",
+    "DPPC", "DPPCGains", "THESIS_TABLE42",
+    "ConfigError", "ControlError", "LoopError", "ReferenceError_",
+    "CommandLimits", "PEA_LIMITS", "GMA_LIMITS",
+    "ALGORITHMS", "LoopResult", "make_controller", "mismatched", "run_closed_loop",
+    "PID", "PIDGains", "OpenLoop",
+    "Reference", "TABLE_REFERENCES", "parse_reference",
+]

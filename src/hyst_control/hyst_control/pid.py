@@ -1,0 +1,140 @@
+"""Baselines: a PID with anti-windup, and the open-loop inverse-model feedforward.
+
+PID (SI gains): u = K_p·e + I + D with e = r − y,
+I_k = I_{k−1} + Δt·(K_i·e_k + (u_sat − u_raw)/T_t)  (back-calculation anti-windup, T_t = ``t_track``),
+D = derivative of −y (no kick on reference steps) through a first-order filter with time constant ``t_filter``.
+Bumpless start: :meth:`PID.reset` preloads I so that the first output equals the command in force.
+
+Open loop (:class:`OpenLoop`): the same one-step inversion as (4.11) with χ → 0, but driven by the model's own
+predicted output instead of the measurement — the inverse-model feedforward the thesis's open-loop experiments
+(Figs. 4.4–4.6) lack. The model state advances with :func:`hyst_model.core.mbw_step` on the applied command.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from hyst_model.core import MBWParams, mbw_step
+
+from .base import BaseController, ModelBased, invert_nu
+from .errors import ConfigError
+from .limits import CommandLimits
+
+__all__ = ["PIDGains", "PID", "OpenLoop"]
+
+
+@dataclass(frozen=True)
+class PIDGains:
+    """PID gains in SI units.
+
+    Defaults are tuned on the embedded PEA default (DC gain ≈ 0.2 µm/V, feed-through ≈ 0.15 µm/V) at 2 kHz for
+    an integral gain of 0.8 per sample relative to the DC gain (K_i·Δt·0.2 µm/V), chosen from a grid over K_p,
+    K_i as the best step/10 Hz/30 Hz compromise that still tolerates a 20 % gain error: an honest baseline.
+
+    Attributes
+    ----------
+    kp : float
+        V/m.
+    ki : float
+        V/(m·s).
+    kd : float
+        V·s/m.
+    t_filter : float
+        Derivative filter time constant (s).
+    t_track : float
+        Back-calculation time constant (s); smaller = faster unwinding.
+    """
+
+    kp: float = 1.0e6
+    ki: float = 8.0e9
+    kd: float = 0.0
+    t_filter: float = 2e-3
+    t_track: float = 5e-3
+
+    def __post_init__(self) -> None:
+        if not all(math.isfinite(v) and v >= 0 for v in (self.kp, self.ki, self.kd)):
+            raise ConfigError("PID gains must be finite and >= 0")
+        if not (self.t_filter > 0 and self.t_track > 0):
+            raise ConfigError("PID t_filter and t_track must be positive")
+
+
+class PID(BaseController):
+    """PID with back-calculation anti-windup and filtered derivative on the measurement."""
+
+    name = "pid"
+
+    def __init__(self, dt: float, gains: PIDGains = PIDGains(), limits: CommandLimits | None = None) -> None:
+        super().__init__(dt, limits)
+        self.gains = gains
+        self._i = 0.0
+        self._d = 0.0
+        self._raw = math.nan
+        self._e = 0.0
+
+    def set_gains(self, gains: PIDGains) -> None:
+        """Swap gains bumplessly: the integrator absorbs the change of the proportional term."""
+        if math.isfinite(self._e):
+            self._i += (self.gains.kp - gains.kp) * self._e
+        self.gains = gains
+
+    def _on_reset(self, y0: float, u0: float, r0: float) -> None:
+        self._e = r0 - y0
+        self._d = 0.0
+        self._i = u0 - self.gains.kp * self._e  # first output = u0: bumpless
+        self._raw = u0
+
+    def _law(self, r_k: float, y: float) -> float:
+        g, dt = self.gains, self.dt
+        e = r_k - y
+        a = dt / (g.t_filter + dt)
+        self._d += a * (-g.kd * (y - self._y_prev) / dt - self._d)
+        self._i += g.ki * dt * e
+        self._e = e
+        self._raw = g.kp * e + self._i + self._d
+        return self._raw
+
+    def _commit(self, u: float) -> None:
+        # Back-calculation: bleed the integrator by the part of the output the limiter removed.
+        if u != self._raw:
+            self._i += (u - self._raw) * min(1.0, self.dt / self.gains.t_track)
+
+    def state(self) -> dict[str, float]:
+        s = super().state()
+        s.update(p=self.gains.kp * self._e, i=self._i, d=self._d)
+        return s
+
+
+class OpenLoop(ModelBased):
+    """Inverse-model feedforward: u_k such that the model's predicted output equals r_k; no feedback."""
+
+    name = "open_loop"
+
+    def __init__(self, model: MBWParams, dt: float, limits: CommandLimits | None = None,
+                 zeta0: float = 1e-3, exact_rate: bool = True) -> None:
+        super().__init__(model, dt, limits)
+        if not zeta0 > 0:
+            raise ConfigError("zeta0 must be positive")
+        self.zeta0 = zeta0
+        self.exact_rate = exact_rate
+        self._ym_state = 0.0
+        self._nu = 0.0
+
+    def _on_reset(self, y0: float, u0: float, r0: float) -> None:
+        self._ym_state = self._ym(y0)
+
+    def _law(self, r_k: float, y: float) -> float:
+        ys, us, p = self._ys, self._us, self._p
+        r_m = (r_k - self._off) / ys
+        r_u = abs(r_k - self._r_prev) / ys
+        y_r = r_m - p[6] * self._ym_state
+        nu = invert_nu(p, self._ym_state, y_r, self._u_prev / us, r_u, self.exact_rate, self.zeta0)
+        self._nu = nu
+        return (p[7] * self._u_prev / us + nu) * us
+
+    def _commit(self, u: float) -> None:
+        self._ym_state = mbw_step(self._p, self._ym_state, u / self._us, self._u_prev / self._us)
+
+    def state(self) -> dict[str, float]:
+        s = super().state()
+        s.update(nu=self._nu, prediction=self._ym_state * self._ys + self._off)
+        return s

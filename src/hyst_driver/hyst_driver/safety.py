@@ -1,0 +1,214 @@
+"""Voltage safety: the one place the amplifier limits are enforced before any byte leaves the driver.
+
+Pure (no I/O, no clock): callers pass time steps. Invariants, proven by the property test
+``test/test_safety_property.py`` over random command streams including NaN, ±inf and huge values:
+
+1. every output lies in ``[v_min, v_max]`` — after rounding to the wire grid (:attr:`Limits.quantum`, 1 µV),
+   so the decoded frame is inside the window too;
+2. consecutive outputs differ by at most ``slew_max · dt`` with ``dt`` capped at one device sample
+   (``dt_max``): a long pause does not license a step, since the amplifier would see it as one;
+3. non-finite requests, and finite ones further than one window span outside the window ("huge": a corrupted
+   or unit-confused command, e.g. 150000 meant as mV), are *rejected*: the previous target is kept. Requests
+   just outside the window are *clipped* (ordinary saturation) and counted.
+
+When the limits change so that the present output falls outside the new window, the output moves into the
+window at once (invariant 1 wins over 2).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from .errors import ConfigError
+
+__all__ = ["Limits", "VoltageLimiter", "CommandWatchdog", "LimiterCounts"]
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Voltage window, slew limit and safe voltage of the amplifier input.
+
+    Attributes
+    ----------
+    v_min, v_max : float
+        Window (V), ``v_min < v_max``.
+    slew_max : float
+        Largest rate of change (V/s), > 0.
+    v_safe : float
+        Voltage the driver ramps to when commands stop and on shutdown (V), inside the window.
+    dt_max : float
+        Longest time step credited to the slew limit (s): one device sample period.
+    quantum : float
+        Wire resolution (V); outputs are multiples of it.
+    """
+
+    v_min: float
+    v_max: float
+    slew_max: float
+    v_safe: float
+    dt_max: float = 1e-3
+    quantum: float = 1e-6
+
+    def __post_init__(self) -> None:
+        vals = (self.v_min, self.v_max, self.slew_max, self.v_safe, self.dt_max, self.quantum)
+        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in vals):
+            raise ConfigError(f"limits must be finite numbers: {self}")
+        if not self.v_min < self.v_max:
+            raise ConfigError(f"v_min ({self.v_min} V) must be below v_max ({self.v_max} V)")
+        if not self.v_min <= self.v_safe <= self.v_max:
+            raise ConfigError(f"v_safe ({self.v_safe} V) must lie in [v_min, v_max] = [{self.v_min}, {self.v_max}] V")
+        if not self.slew_max > 0 or not self.dt_max > 0 or not self.quantum > 0:
+            raise ConfigError("slew_max, dt_max and quantum must be positive")
+        if self.hi_q < self.lo_q:
+            raise ConfigError(f"window [{self.v_min}, {self.v_max}] V holds no multiple of {self.quantum} V")
+
+    def to_volts(self, k: int) -> float:
+        """Voltage of grid index ``k``; divides by 1/quantum when that is an integer (1e6 → exact decimals)."""
+        inv = round(1.0 / self.quantum)
+        return k / inv if abs(inv * self.quantum - 1.0) < 1e-12 else k * self.quantum
+
+    @property
+    def lo_q(self) -> int:
+        """Smallest grid index whose voltage is ≥ v_min."""
+        k = round(self.v_min / self.quantum)
+        return k + 1 if self.to_volts(k) < self.v_min else k
+
+    @property
+    def hi_q(self) -> int:
+        """Largest grid index whose voltage is ≤ v_max."""
+        k = round(self.v_max / self.quantum)
+        return k - 1 if self.to_volts(k) > self.v_max else k
+
+    def is_huge(self, v: float) -> bool:
+        """True for requests more than one window span outside the window (rejected, not clipped)."""
+        span = self.v_max - self.v_min
+        return not (self.v_min - span <= v <= self.v_max + span)
+
+
+@dataclass
+class LimiterCounts:
+    """Running counts for diagnostics."""
+
+    accepted: int = 0
+    clipped: int = 0
+    rejected: int = 0
+    slew_limited: int = 0
+
+
+class VoltageLimiter:
+    """Stateful limiter: turns requested voltages into safe output voltages.
+
+    Parameters
+    ----------
+    limits : Limits
+    v0 : float, optional
+        Present output (e.g. the voltage the device reports after connecting); ``v_safe`` if omitted.
+    """
+
+    def __init__(self, limits: Limits, v0: float | None = None) -> None:
+        self._limits = limits
+        self._k = self._clamp_k(self._to_k(limits.v_safe if v0 is None else v0))
+        self._target_k = self._k
+        self.counts = LimiterCounts()
+
+    # ------------------------------------------------------------ state
+    @property
+    def limits(self) -> Limits:
+        return self._limits
+
+    @property
+    def value(self) -> float:
+        """Present output (V), on the wire grid."""
+        return self._limits.to_volts(self._k)
+
+    @property
+    def target(self) -> float:
+        """Voltage the output is moving to (V)."""
+        return self._limits.to_volts(self._target_k)
+
+    @property
+    def settled(self) -> bool:
+        """True when the output has reached the target."""
+        return self._k == self._target_k
+
+    def _to_k(self, v: float) -> int:
+        if not isinstance(v, (int, float)) or not math.isfinite(v):
+            return round(self._limits.v_safe / self._limits.quantum)
+        v = min(max(v, self._limits.v_min - 1.0), self._limits.v_max + 1.0)  # no overflow for 1e308
+        return round(v / self._limits.quantum)
+
+    def _clamp_k(self, k: int) -> int:
+        return min(max(k, self._limits.lo_q), self._limits.hi_q)
+
+    def reset(self, v: float) -> None:
+        """Re-seed the output with what the device actually applies (after a (re)connect).
+
+        Non-finite ``v`` seeds ``v_safe``; values outside the window are brought inside it. The target becomes
+        the output, so nothing moves until the next request.
+        """
+        self._k = self._clamp_k(self._to_k(v))
+        self._target_k = self._k
+
+    def set_limits(self, limits: Limits) -> None:
+        """Swap the limits; output and target are brought into the new window at once."""
+        self._limits = limits
+        self._k = self._clamp_k(self._k)
+        self._target_k = self._clamp_k(self._target_k)
+
+    # ------------------------------------------------------------ requests
+    def request(self, v: float) -> bool:
+        """Set a new target. Returns False (and keeps the old target) for non-finite or huge requests."""
+        lim = self._limits
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or lim.is_huge(v):
+            self.counts.rejected += 1
+            return False
+        k = round(v / lim.quantum)
+        kc = self._clamp_k(k)
+        if kc != k:
+            self.counts.clipped += 1
+        self.counts.accepted += 1
+        self._target_k = kc
+        return True
+
+    def request_safe(self) -> None:
+        """Target ``v_safe`` (watchdog, shutdown)."""
+        self._target_k = self._clamp_k(round(self._limits.v_safe / self._limits.quantum))
+
+    def step(self, dt: float) -> float:
+        """Advance the output toward the target by at most ``slew_max · min(dt, dt_max)``; return it (V).
+
+        A non-finite or negative ``dt`` counts as zero (the output holds).
+        """
+        lim = self._limits
+        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+            dt = 0.0
+        max_dk = math.floor(lim.slew_max * min(dt, lim.dt_max) / lim.quantum)
+        dk = self._target_k - self._k
+        if abs(dk) > max_dk:
+            self.counts.slew_limited += 1
+            dk = max_dk if dk > 0 else -max_dk
+        self._k = self._clamp_k(self._k + dk)
+        return self.value
+
+    def update(self, v: float, dt: float) -> float:
+        """``request(v)`` then ``step(dt)``: one command in, one safe output out."""
+        self.request(v)
+        return self.step(dt)
+
+
+@dataclass
+class CommandWatchdog:
+    """Expires when no command has arrived for ``timeout`` seconds (times from the caller's monotonic clock).
+
+    Starts expired: until the first command arrives the driver holds or ramps to ``v_safe``.
+    """
+
+    timeout: float
+    last: float = field(default=-math.inf)
+
+    def feed(self, now: float) -> None:
+        """A command arrived at ``now``."""
+        self.last = now
+
+    def expired(self, now: float) -> bool:
+        return now - self.last > self.timeout

@@ -1,0 +1,385 @@
+"""Serial transport with reconnect, and :class:`DeviceLink`: one adapter + one transport + the voltage limiter.
+
+The transport is injected (``opener``, default :func:`serial.serial_for_url`), so tests use ``loop://`` or a pty
+pair and the rig uses ``/dev/ttyACM0`` or a stable ``/dev/serial/by-id/...`` path. Nothing here imports rclpy:
+the node (``driver_node.py``) runs :meth:`DeviceLink.service` in an I/O thread and publishes the readings.
+
+Link states: ``disconnected`` → (port opens) → ``handshake`` (stop any old stream, identify, read one sample to
+learn the voltage the amplifier applies *now* and seed the limiter with it) → ``running``. Any I/O error, a
+vanished port, or no sample for ``link_timeout`` closes the port and goes back to ``disconnected``; reopening is
+retried with exponential backoff. Voltages only leave through :class:`hyst_driver.safety.VoltageLimiter`.
+"""
+from __future__ import annotations
+
+import math
+import os
+import select
+import time
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import serial
+
+from .adapter import Adapter, BadFrame, DeviceFault, Identified, Reading
+from .errors import EncodeError, LinkError
+from .safety import CommandWatchdog, Limits, VoltageLimiter
+
+__all__ = ["SerialTransport", "DeviceLink", "LinkHealth"]
+
+
+class SerialTransport:
+    """A serial port that can vanish and come back.
+
+    Parameters
+    ----------
+    url : str
+        Anything :func:`serial.serial_for_url` opens: a device path, a pty path, ``loop://``.
+    baudrate : int
+        Ignored by ptys and USB-CDC devices; a UART needs ≥ 921600 for 1 kHz streaming.
+    opener : callable
+        ``opener(url, baudrate=..., timeout=..., write_timeout=...)`` returning a pyserial-like object.
+    backoff : (float, float)
+        First and largest delay (s) between reopen attempts; the delay doubles after each failure.
+    """
+
+    def __init__(self, url: str, baudrate: int = 921600, opener: Callable = serial.serial_for_url,
+                 backoff: tuple[float, float] = (0.02, 0.5), write_timeout: float = 0.05) -> None:
+        self.url, self.baudrate, self._opener = url, int(baudrate), opener
+        self.backoff = backoff
+        self.write_timeout = write_timeout
+        self._port = None
+        self._delay = backoff[0]
+        self._next_try = -math.inf
+        self.last_error = ""
+
+    @property
+    def is_open(self) -> bool:
+        return self._port is not None
+
+    def try_open(self, now: float) -> bool:
+        """Open the port unless a backoff delay is pending; False (and a longer delay) on failure."""
+        if self._port is not None:
+            return True
+        if now < self._next_try:
+            return False
+        try:
+            self._port = self._opener(self.url, baudrate=self.baudrate, timeout=0,
+                                      write_timeout=self.write_timeout)
+        except (serial.SerialException, OSError, ValueError) as err:
+            self.last_error = f"open {self.url}: {err}"
+            self._next_try = now + self._delay
+            self._delay = min(2 * self._delay, self.backoff[1])
+            return False
+        self._delay = self.backoff[0]
+        try:
+            self._port.reset_input_buffer()  # stale bytes from before a replug are not news
+        except (serial.SerialException, OSError, AttributeError):
+            pass
+        return True
+
+    def close(self) -> None:
+        """Close (idempotent); the next :meth:`try_open` may follow after the shortest backoff."""
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.close()
+            except (serial.SerialException, OSError):
+                pass
+
+    def fileno(self) -> int | None:
+        """File descriptor to wait on, or None (``loop://`` has none)."""
+        try:
+            return self._port.fileno() if self._port is not None else None
+        except (AttributeError, serial.SerialException, OSError, ValueError, NotImplementedError):
+            return None
+
+    def read(self) -> bytes:
+        """Whatever has arrived (non-blocking). Raises :class:`LinkError` (and closes) when the port is gone."""
+        if self._port is None:
+            raise LinkError("port is closed")
+        try:
+            # read() itself (not in_waiting) notices a hung-up pty / unplugged USB device: EIO or "readiness
+            # to read but returned no data" become SerialException.
+            return self._port.read(4096)
+        except (serial.SerialException, OSError) as err:
+            self.close()
+            self.last_error = f"read: {err}"
+            raise LinkError(f"read from {self.url} failed: {err}") from err
+
+    def write(self, data: bytes) -> None:
+        """Write all of ``data``; raises :class:`LinkError` (and closes) on I/O errors or a stuck port."""
+        if not data:
+            return
+        if self._port is None:
+            raise LinkError("port is closed")
+        try:
+            self._port.write(data)
+        except (serial.SerialException, OSError) as err:  # SerialTimeoutException is a SerialException
+            self.close()
+            self.last_error = f"write: {err}"
+            raise LinkError(f"write to {self.url} failed: {err}") from err
+
+
+@dataclass
+class LinkHealth:
+    """Counters and state for ``/diagnostics`` (a copy is handed out; the link keeps its own)."""
+
+    state: str = "disconnected"
+    identity: str = ""
+    connects: int = 0
+    disconnects: int = 0
+    handshake_failures: int = 0
+    samples: int = 0
+    lost_samples: int = 0
+    timeouts: int = 0
+    bad_frames: dict = field(default_factory=dict)
+    device_errors: int = 0
+    severe_faults: int = 0
+    last_device_error: str = ""
+    last_link_error: str = ""
+    writes: int = 0
+    encode_errors: int = 0
+    watchdog_active: bool = True
+    commanded_v: float = math.nan
+    applied_v: float = math.nan
+    clipped: int = 0
+    rejected: int = 0
+    slew_limited: int = 0
+
+
+class DeviceLink:
+    """Drives one device: handshake, reconnect, limited voltage writes, polling, watchdog, health.
+
+    Parameters
+    ----------
+    transport : SerialTransport
+    adapter : Adapter
+    limits : Limits
+        ``dt_max`` should be one sample period, ``1/rate_hz``.
+    rate_hz : int
+        Sample rate (streamed by the device, or polled by the host).
+    command_timeout : float
+        No command for this long (s) → ramp to ``v_safe``.
+    link_timeout : float
+        No sample for this long (s) → close and reconnect.
+    clock : callable
+        Monotonic seconds (injectable for tests).
+    """
+
+    HANDSHAKE_TIMEOUT = 0.25
+    HANDSHAKE_TRIES = 3
+
+    def __init__(self, transport: SerialTransport, adapter: Adapter, limits: Limits, rate_hz: int, *,
+                 command_timeout: float = 0.1, link_timeout: float = 0.5, err_poll_period: float = 0.1,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.transport, self.adapter = transport, adapter
+        self.limiter = VoltageLimiter(limits)
+        self.period = 1.0 / float(rate_hz)
+        self.rate_hz = int(rate_hz)
+        self.watchdog = CommandWatchdog(command_timeout)
+        self.link_timeout = float(link_timeout)
+        self.sample_timeout = max(5 * self.period, 0.02)
+        self.err_poll_period = err_poll_period
+        self.clock = clock
+        self.health = LinkHealth()
+        self._pending_cmd: tuple[float, float] | None = None
+        self._pending_limits: Limits | None = None
+        self._last_write = -math.inf
+        self._last_poll = -math.inf
+        self._last_err_poll = -math.inf
+        self._last_rx = -math.inf
+        self._in_timeout = False
+        self._hs_deadline = 0.0
+        self._hs_tries = 0
+        self._seeded = False
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_r, False)
+        os.set_blocking(self._wake_w, False)
+
+    # ------------------------------------------------------------ inputs from other threads
+    def command(self, volts: float, now: float | None = None) -> None:
+        """Queue a commanded voltage (thread-safe: one atomic assignment plus a wake-up byte)."""
+        self._pending_cmd = (volts, self.clock() if now is None else now)
+        self.wake()
+
+    def set_limits(self, limits: Limits, command_timeout: float | None = None) -> None:
+        """Queue new limits (applied by the I/O thread before its next write)."""
+        self._pending_limits = limits
+        if command_timeout is not None:
+            self.watchdog.timeout = float(command_timeout)
+        self.wake()
+
+    def wake(self) -> None:
+        try:
+            os.write(self._wake_w, b"\0")
+        except BlockingIOError:
+            pass
+
+    def wait(self, timeout: float) -> None:
+        """Block until the port is readable, :meth:`command` was called, or ``timeout`` (s) passed."""
+        fds = [self._wake_r]
+        fd = self.transport.fileno()
+        if fd is not None:
+            fds.append(fd)
+        try:
+            ready, _, _ = select.select(fds, [], [], max(0.0, timeout))
+        except (OSError, ValueError):  # the port fd vanished under us: service() will notice
+            ready = []
+        if self._wake_r in ready:
+            try:
+                os.read(self._wake_r, 4096)
+            except BlockingIOError:
+                pass
+
+    def next_deadline(self) -> float:
+        """Latest time :meth:`service` must run again without input (ramps, polls, timeouts, reconnects)."""
+        return self.clock() + min(self.period, 0.01)
+
+    def close(self) -> None:
+        self.transport.close()
+        for fd in (self._wake_r, self._wake_w):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+    # ------------------------------------------------------------ the work
+    def snapshot(self) -> LinkHealth:
+        """A copy of the health record, limiter counts included."""
+        c = self.limiter.counts
+        return replace(self.health, bad_frames=dict(self.health.bad_frames), clipped=c.clipped,
+                       rejected=c.rejected, slew_limited=c.slew_limited)
+
+    def service(self, now: float | None = None) -> list[tuple[float, Reading]]:
+        """Do everything that is due; return ``(receive_time, reading)`` pairs. Never raises on link trouble."""
+        now = self.clock() if now is None else now
+        out: list[tuple[float, Reading]] = []
+        try:
+            self._service(now, out)
+        except LinkError as err:
+            self._drop(str(err))
+        return out
+
+    def _drop(self, why: str) -> None:
+        self.transport.close()
+        if self.health.state != "disconnected":
+            self.health.disconnects += 1
+        self.health.state = "disconnected"
+        self.health.last_link_error = why
+        self._seeded = False
+
+    def _service(self, now: float, out: list) -> None:
+        h = self.health
+        if self._pending_limits is not None:
+            lim, self._pending_limits = self._pending_limits, None
+            self.limiter.set_limits(lim)
+        if h.state == "disconnected":
+            if not self.transport.try_open(now):
+                h.last_link_error = self.transport.last_error or h.last_link_error
+                return
+            self.adapter.reset()
+            h.state, h.identity, self._seeded, self._hs_tries = "handshake", "", False, 0
+            self._send_handshake(now)
+        data = self.transport.read()
+        for ev in self.adapter.feed(data) if data else ():
+            self._event(ev, now, out)
+        h.lost_samples = self.adapter.lost_samples
+        if h.state == "handshake":
+            if h.identity and self._seeded:
+                self.transport.write(self.adapter.start(self.rate_hz))
+                h.state, h.connects = "running", h.connects + 1
+                self._last_rx, self._in_timeout = now, False
+            elif now > self._hs_deadline:
+                if self._hs_tries >= self.HANDSHAKE_TRIES:
+                    h.handshake_failures += 1
+                    raise LinkError(f"no handshake answer from {self.transport.url}")
+                self._send_handshake(now)
+            return
+        self._run(now)
+
+    def _send_handshake(self, now: float) -> None:
+        self._hs_tries += 1
+        self._hs_deadline = now + self.HANDSHAKE_TIMEOUT
+        self.adapter.reset()
+        self.transport.write(self.adapter.stop() + self.adapter.identify() + self.adapter.read_once())
+
+    def _event(self, ev, now: float, out: list) -> None:
+        h = self.health
+        if isinstance(ev, Reading):
+            self._last_rx, self._in_timeout = now, False
+            h.applied_v = ev.applied_v
+            if h.state == "handshake" and not self._seeded:
+                # Start from what the amplifier applies now: after a replug it may have reset to 0 V.
+                self.limiter.reset(ev.applied_v)
+                self._seeded = True
+                return
+            h.samples += 1
+            out.append((now, ev))
+        elif isinstance(ev, BadFrame):
+            h.bad_frames[ev.kind] = h.bad_frames.get(ev.kind, 0) + 1
+        elif isinstance(ev, DeviceFault):
+            h.device_errors += 1
+            h.severe_faults += int(ev.severe)
+            h.last_device_error = f"{ev.code}: {ev.text}"
+        elif isinstance(ev, Identified):
+            h.identity = ev.text
+
+    def _write_voltage(self, now: float) -> None:
+        v = self.limiter.step(now - self._last_write)
+        try:
+            data = self.adapter.set_voltage(v)
+        except EncodeError:  # cannot happen for limiter output; counted, never sent
+            self.health.encode_errors += 1
+            return
+        self.transport.write(data)
+        self._last_write = now
+        self.health.writes += 1
+        self.health.commanded_v = v
+
+    def _run(self, now: float) -> None:
+        h = self.health
+        cmd, self._pending_cmd = self._pending_cmd, None
+        if cmd is not None:
+            self.watchdog.feed(cmd[1])
+            self.limiter.request(cmd[0])
+        if self.watchdog.expired(now):
+            self.limiter.request_safe()
+            h.watchdog_active = True
+        else:
+            h.watchdog_active = False
+        due = now - self._last_write >= self.period
+        if cmd is not None or (not self.limiter.settled and due) or now - self._last_write >= 0.1:
+            self._write_voltage(now)  # new command, ramp in progress (once per sample), or 10 Hz keepalive
+        since_poll = now - self._last_poll
+        if not self.adapter.streaming and since_poll >= self.period and \
+                (not self.adapter.busy or since_poll >= self.sample_timeout):  # one exchange in flight
+            self.transport.write(self.adapter.poll())
+            self._last_poll = now
+            if now - self._last_err_poll >= self.err_poll_period:
+                self.transport.write(self.adapter.error_query())
+                self._last_err_poll = now
+        silent = now - self._last_rx
+        if silent > self.sample_timeout and not self._in_timeout:
+            h.timeouts += 1
+            self._in_timeout = True
+        if silent > self.link_timeout:
+            raise LinkError(f"no sample for {silent:.3f} s")
+
+    def ramp_to_safe(self, max_seconds: float = 5.0, sleep: Callable[[float], None] = time.sleep) -> bool:
+        """Blocking: ramp the output to ``v_safe`` at the slew limit, then stop streaming (shutdown path).
+
+        Returns True when ``v_safe`` was written, False when the link was down or the time ran out.
+        """
+        self.watchdog.timeout = -1.0  # expired from now on: target is v_safe
+        t_end = self.clock() + max_seconds
+        while self.clock() < t_end:
+            self.service()
+            if self.health.state == "running" and self.limiter.settled \
+                    and self.health.commanded_v == self.limiter.value:
+                try:
+                    self.transport.write(self.adapter.stop())
+                except LinkError:
+                    pass
+                return True
+            sleep(self.period)
+        return False

@@ -1,0 +1,262 @@
+"""``hyst compare DATA --params P``: where does a fitted model fail on a measured record?
+
+Runs the model of a params file in simulation (free-run) mode on the record's input and prints fit figures
+overall, per input segment (holds, steps, sines by frequency), per branch (rising/falling input), per input
+level and per frequency band, plus the residual tests of :mod:`hyst_model.diagnose.stats` (whiteness,
+residual–input cross-correlation, higher-order tests) in plain words. ``--json`` prints one JSON object
+instead; ``--report DIR`` writes PNG plots and an ``index.html`` (:func:`hyst_model.diagnose.report.write_report`).
+
+Examples::
+
+    hyst compare bags/run1 --params stage.yaml --report out/run1
+    hyst compare piezo.csv --columns t_s,voltage_V,displacement_um --params piezo.yaml --json
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataError, HystError
+
+__all__ = ["register", "run", "compare_record", "summary_text"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``compare`` subcommand."""
+    p = subparsers.add_parser(
+        "compare", help="compare a fitted model with measured data: fit figures, residual tests, report",
+        description="Run the model of a params file on a record (bag or CSV) in simulation mode and show where "
+                    "it fails: by time segment, input branch, input level and frequency band, with residual "
+                    "whiteness / cross-correlation tests (99 %% bounds, as MATLAB resid) and higher-order "
+                    "tests for even-order effects.")
+    p.add_argument("data", metavar="DATA", help="rosbag2 directory / .mcap file (/stage/state) or CSV file")
+    p.add_argument("--params", "-p", required=True, metavar="P", help="params file written by 'hyst fit'")
+    p.add_argument("--report", metavar="DIR", help="write PNG plots and index.html into DIR")
+    p.add_argument("--force", action="store_true",
+                   help="write the report into DIR even if it holds files hyst did not write")
+    p.add_argument("--json", action="store_true", help="print one JSON object with the figures")
+    p.add_argument("--topic", default="/stage/state", help="state topic in a bag (default /stage/state)")
+    p.add_argument("--columns", metavar="T,U,Y", help="CSV column names of time, input, output")
+    p.add_argument("--units", metavar="T,U,Y", help="CSV units of those columns, e.g. s,V,um")
+    p.add_argument("--window", metavar="T0:T1", help="compare only samples with T0 <= t < T1 (s)")
+    p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
+                   help="Python file with user effects the params file uses (repeatable)")
+    p.add_argument("--levels", type=int, default=5, help="number of input-level bins (default 5)")
+    p.add_argument("--lags", type=int, default=25, help="lags of the correlation tests (default 25)")
+    p.set_defaults(func=run)
+
+
+def _window(text: str | None) -> tuple[float, float]:
+    if not text:
+        return -np.inf, np.inf
+    a, sep, b = text.partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        t0 = float(a) if a.strip() else -np.inf
+        t1 = float(b) if b.strip() else np.inf
+    except ValueError:
+        raise DataError(f"--window must look like T0:T1 in seconds (got {text!r})") from None
+    if not t1 > t0:
+        raise DataError(f"--window {text!r} is empty")
+    return t0, t1
+
+
+def compare_record(record, model, theta, *, n_levels: int = 5, max_lag: int = 25):
+    """Model output and :class:`~hyst_model.diagnose.stats.CompareStats` of ``model`` at ``theta`` on ``record``.
+
+    Raises
+    ------
+    HystError
+        The model produces non-finite output on this input (diverges) or the record is too short.
+    """
+    from ..diagnose.stats import compare_stats
+    try:
+        yhat = np.asarray(model.simulate(np.asarray(theta, float), record.t, record.u), dtype=np.float64)
+    except HystError:
+        raise
+    except (ValueError, FloatingPointError, ZeroDivisionError) as err:
+        raise HystError(f"the model cannot be run on {record.source}: {err}") from err
+    if yhat.shape != record.y.shape:
+        raise HystError(f"model output has {yhat.size} samples for {record.y.size} inputs")
+    if not np.all(np.isfinite(yhat)):
+        k = int(np.flatnonzero(~np.isfinite(yhat))[0])
+        raise HystError(f"the model diverges on this input (non-finite output from t={record.t[k]:.4g} s); "
+                        "was it fitted on a comparable input range and sample rate?")
+    try:
+        st = compare_stats(record.t, record.u, record.y, yhat, n_levels=n_levels, max_lag=max_lag)
+    except ValueError as err:
+        raise DataError(f"{record.source}: {err}") from err
+    return yhat, st
+
+
+def _um(x: float) -> str:
+    from ..effects.signals import fmt_len
+    return fmt_len(x) if np.isfinite(x) else "n/a"
+
+
+def _pct(x: float) -> str:
+    return f"{x:6.1f} %" if np.isfinite(x) else "   n/a"
+
+
+def findings(st) -> list[str]:
+    """Plain-language observations from the stats (what a lab user should look at first)."""
+    out: list[str] = []
+    o = st.overall
+    noise = st.noise_sigma
+    if noise > 0 and o.rmse < 2.0 * noise:
+        out.append(f"The residual ({_um(o.rmse)} RMS) is at the sensor noise level ({_um(noise)}): "
+                   "nothing left to explain.")
+    if abs(o.bias) > 0.5 * o.rmse and o.rmse > 0:
+        out.append(f"Most of the error is a constant offset ({_um(o.bias)}): check the fitted offset / zero.")
+    segs = [s for s in st.segments if s.fit.n >= 10 and np.isfinite(s.fit.rmse)]
+    if len(segs) > 1:
+        w = max(segs, key=lambda s: s.fit.rmse)
+        if w.fit.rmse > 1.5 * o.rmse:
+            out.append(f"The error concentrates in segment '{w.label}' ({w.t0:.3g}–{w.t1:.3g} s): "
+                       f"{_um(w.fit.rmse)} RMS vs {_um(o.rmse)} overall.")
+        sines = sorted((s for s in segs if s.kind == "sine"), key=lambda s: s.freq)
+        if len(sines) >= 2 and sines[-1].fit.rmse > 1.5 * sines[0].fit.rmse:
+            out.append(f"The error grows with frequency ({sines[0].freq:.3g} Hz: {_um(sines[0].fit.rmse)}, "
+                       f"{sines[-1].freq:.3g} Hz: {_um(sines[-1].fit.rmse)}): rate dependence or dynamics.")
+        holds = [s for s in segs if s.kind in ("hold", "step")]
+        if holds and max(h.fit.rmse for h in holds) > 1.5 * o.rmse:
+            out.append("Held inputs fit worse than moving ones: the model misses slow behaviour after steps "
+                       "(creep, drift) or the rest level.")
+    br = st.branches
+    r, f = br["rising"], br["falling"]
+    if r.n > 10 and f.n > 10 and np.isfinite(r.bias) and np.isfinite(f.bias):
+        orient = st.extra.get("loop_orientation", 0)
+        if abs(r.bias - f.bias) > 0.5 * o.rmse and o.rmse > 0 and orient:
+            wide = "wider" if (f.bias - r.bias) * orient > 0 else "narrower"
+            out.append(f"Rising and falling branches carry opposite mean errors ({_um(r.bias)} vs {_um(f.bias)}): "
+                       f"the measured loop is {wide} than the model's.")
+    lv = [f for _, _, f in st.levels if f.n >= 10]
+    if len(lv) >= 3 and np.isfinite(lv[0].bias) and np.isfinite(lv[-1].bias):
+        if abs(lv[0].bias - lv[-1].bias) > 0.5 * o.rmse and np.sign(lv[0].bias) != np.sign(lv[-1].bias):
+            out.append(f"The mean error changes sign from low to high input ({_um(lv[0].bias)} → "
+                       f"{_um(lv[-1].bias)}): a gain or end-point error, possibly asymmetry or saturation.")
+    bands = [b for b in st.bands if np.isfinite(b.rmse)]
+    if bands and o.rmse > 0:
+        b = max(bands, key=lambda b: b.rmse)
+        share = (b.rmse / o.rmse) ** 2
+        if share > 0.5:
+            out.append(f"{100 * share:.0f} % of the residual power lies in {b.f_lo:.3g}–{b.f_hi:.3g} Hz.")
+    if st.cross.significant:
+        lag = st.cross.lag_at_max * (1.0 / st.fs)
+        when = "past" if lag >= 0 else "future"
+        out.append(f"The residual is correlated with the input (max {st.cross.max_abs:.2f} at {lag * 1e3:.3g} ms, "
+                   f"{when} inputs; bound ±{st.cross.bound:.3f}): input-driven behaviour the model lacks.")
+    ho = {k: c for k, c in st.higher.items() if c.significant}
+    words = {"e2_u": "the error size follows the input level",
+             "e_u2": "an even (quadratic) input term is missing — asymmetry or saturation",
+             "e_absdu": "the error follows the input speed |du/dt| — rate dependence or dynamics",
+             "e2_u2": "the error size follows the input magnitude"}
+    for k in ("e_u2", "e_absdu", "e2_u", "e2_u2"):
+        if k in ho:
+            out.append(f"Higher-order test {k} ({ho[k].max_abs:.2f} > ±{ho[k].bound:.3f}): {words[k]}.")
+    if not st.auto.significant:
+        out.append("The residual is white within the 99 % bounds.")
+    return out
+
+
+def summary_text(st, title: str = "") -> str:
+    """The human-readable summary ``hyst compare`` prints."""
+    o = st.overall
+    lines = []
+    if title:
+        lines.append(title)
+    lines.append(f"samples {o.n} at {st.fs:.6g} Hz ({o.n / st.fs:.4g} s); output noise ≈ {_um(st.noise_sigma)}")
+    lines.append(f"overall  RMSE {_um(o.rmse)}  NRMSE {100 * o.nrmse:.2f} %  fit {_pct(o.fit_percent)}  "
+                 f"bias {_um(o.bias)}  max {_um(o.max_abs)}")
+    lines.append("by segment:")
+    for s in st.segments:
+        lines.append(f"  {s.label:<18} {s.t0:9.4g}–{s.t1:<9.4g} s  RMSE {_um(s.fit.rmse):>10}  fit {_pct(s.fit.fit_percent)}")
+    lines.append("by branch:")
+    for k, f in st.branches.items():
+        if f.n:
+            lines.append(f"  {k:<8} n={f.n:<7} RMSE {_um(f.rmse):>10}  bias {_um(f.bias):>10}")
+    lines.append("by input level:")
+    for lo, hi, f in st.levels:
+        lines.append(f"  [{lo:9.4g}, {hi:9.4g}]  n={f.n:<7} RMSE {_um(f.rmse):>10}  bias {_um(f.bias):>10}")
+    lines.append("by frequency band:")
+    for b in st.bands:
+        lines.append(f"  {b.f_lo:9.4g}–{b.f_hi:<9.4g} Hz  residual {_um(b.rmse):>10}  measured {_um(b.y_rms):>10}")
+    lag_s = st.lag_step / st.fs
+    lines.append(f"residual tests (99 % bounds, {len(st.auto.lags) - 1} lags of {lag_s * 1e3:.3g} ms):")
+    for c in [st.auto, st.cross, *st.higher.values()]:
+        mark = "FAIL" if c.significant else "ok  "
+        lines.append(f"  {mark} {c.name:<8} max |r| {c.max_abs:.3f} at {c.lag_at_max / st.fs * 1e3:8.3g} ms  "
+                     f"bound ±{c.bound:.3f}  outside {100 * c.frac_outside:.0f} % of lags")
+    f = findings(st)
+    if f:
+        lines.append("findings:")
+        lines.extend(f"  - {x}" for x in f)
+    return "\n".join(lines)
+
+
+def _load(args) -> tuple[Any, Any, Any, np.ndarray]:
+    from ..effects import load_effect_module
+    from ..io import load_record, read_params
+    for m in args.effect_module:
+        load_effect_module(m)
+    spec = read_params(args.params)
+    model = spec.model()
+    theta = spec.theta(model)
+    rec = load_record(args.data, topic=args.topic, columns=args.columns, units=args.units)
+    t0, t1 = _window(args.window)
+    if np.isfinite(t0) or np.isfinite(t1):
+        rec = rec.between(t0, t1)
+    rec.check()
+    return spec, rec, model, theta
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point of ``hyst compare``; returns the exit code."""
+    if args.levels < 1 or args.lags < 1:
+        raise DataError("--levels and --lags must be at least 1")
+    spec, rec, model, theta = _load(args)
+    notes = []
+    dt_fit = spec.config.get("dt")
+    if isinstance(dt_fit, (int, float)) and dt_fit > 0 and abs(rec.dt / dt_fit - 1.0) > 0.02:
+        notes.append(f"note: the model was fitted at a {dt_fit * 1e3:.4g} ms sample period, this record has "
+                     f"{rec.dt * 1e3:.4g} ms; per-sample models do not transfer across sample rates")
+    yhat, st = compare_record(rec, model, theta, n_levels=args.levels, max_lag=args.lags)
+    report_dir = None
+    if args.report:
+        from ..diagnose.report import write_report
+        report_dir = write_report(args.report, rec, yhat, st, force=args.force,
+                                  title=f"hyst compare: {rec.source} vs {args.params}")
+    if args.json:
+        d = {"data": rec.source, "params": str(args.params), "model": getattr(model, "name", "?"),
+             **st.to_dict(), "findings": findings(st), "notes": notes,
+             "report": str(report_dir / "index.html") if report_dir else None}
+        print(json.dumps(_clean(d), allow_nan=False))
+    else:
+        for n in notes:
+            print(n, file=sys.stderr)
+        print(summary_text(st, f"hyst compare: {rec.source} vs {args.params} (model {getattr(model, 'name', '?')})"))
+        if report_dir:
+            print(f"report: {report_dir / 'index.html'}")
+    return 0
+
+
+def _clean(o):
+    """JSON-safe copy: numpy scalars to Python, NaN/inf to None (JSON has no NaN)."""
+    if isinstance(o, dict):
+        return {str(k): _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return [_clean(v) for v in o.tolist()]
+    if isinstance(o, (bool, np.bool_)):
+        return bool(o)
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (float, np.floating)):
+        return float(o) if np.isfinite(o) else None
+    return o

@@ -1,0 +1,286 @@
+"""HTML report with PNG plots for ``hyst compare`` and ``hyst diagnose`` (matplotlib, Agg backend).
+
+API (stable; ``hyst diagnose`` calls it)::
+
+    write_report(dir, record, model_output, stats, ladder=None, diagnosis=None, *,
+                 force=False, title=None) -> pathlib.Path
+
+* ``dir`` — output directory (created). It is refused (:class:`~hyst_model.errors.HystError`) when it already
+  holds files that hyst did not write (no ``.hyst-report`` marker), unless ``force``; a previous hyst report in
+  it is replaced. Files are written to temporaries and renamed, so a crash never leaves half a PNG.
+* ``record`` — :class:`hyst_model.io.Record` (``t`` s, ``u`` V, ``y`` m, ``source``).
+* ``model_output`` — model output (m), same length as ``record.y``.
+* ``stats`` — :class:`hyst_model.diagnose.stats.CompareStats` of that output.
+* ``ladder`` — optional error ladder: a sequence of mappings ``{"model": "mbw+creep", "rmse": 1.2e-8}``
+  (validation RMSE in m; optional ``"rmse_train"``), base first.
+* ``diagnosis`` — optional mapping as ``hyst diagnose --json`` prints (``baseline``, ``candidates``,
+  ``missing``); shown as a table with the evidence sentences.
+
+Returns the directory; its ``index.html`` links ``time.png``, ``loop.png``, ``residual.png``,
+``spectrum.png``, ``correlation.png`` and (with a ladder) ``ladder.png``.
+"""
+from __future__ import annotations
+
+import html
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import HystError
+
+__all__ = ["write_report", "MARKER", "prepare_dir"]
+
+#: A file hyst writes into every report directory; a directory without it but with other files is not ours.
+MARKER = ".hyst-report"
+_OURS = {"index.html", "time.png", "loop.png", "residual.png", "spectrum.png", "correlation.png", "ladder.png",
+         MARKER}
+
+
+def prepare_dir(path: str | os.PathLike, force: bool = False) -> Path:
+    """Create ``path`` or check that it is a previous hyst report (or empty); return it.
+
+    Raises
+    ------
+    HystError
+        ``path`` is a file, or a directory holding files hyst did not write (and ``force`` is false).
+    """
+    d = Path(path)
+    if d.exists() and not d.is_dir():
+        raise HystError(f"report directory {d} is a file")
+    if d.is_dir():
+        names = {p.name for p in d.iterdir()}
+        foreign = sorted(names - _OURS)
+        if names and MARKER not in names and not force:
+            raise HystError(f"report directory {d} is not empty and not a hyst report "
+                            f"(e.g. {', '.join(foreign[:3]) or ', '.join(sorted(names)[:3])}); "
+                            "choose another directory or pass --force")
+        if foreign and not force:
+            raise HystError(f"report directory {d} holds files hyst did not write ({', '.join(foreign[:3])}); "
+                            "choose another directory or pass --force")
+    else:
+        try:
+            d.mkdir(parents=True)
+        except OSError as err:
+            raise HystError(f"cannot create report directory {d}: {err}") from err
+    (d / MARKER).write_text("written by hyst; files listed in index.html are replaced on the next report\n")
+    return d
+
+
+def _save(fig, path: Path) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=110)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _scale(y: np.ndarray) -> tuple[float, str]:
+    a = float(np.nanmax(np.abs(y))) if y.size else 1.0
+    if a < 1e-6:
+        return 1e9, "nm"
+    if a < 1e-3:
+        return 1e6, "µm"
+    return 1e3, "mm"
+
+
+def _plots(d: Path, t, u, y, yhat, st, ladder) -> list[tuple[str, str]]:
+    import matplotlib
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    e = y - yhat
+    k, unit = _scale(np.concatenate([y, yhat]))
+    ke, unite = _scale(e)
+    figs: list[tuple[str, str]] = []
+    # Measured vs model over time, with the input.
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    a1.plot(t, k * y, lw=0.8, label="measured")
+    a1.plot(t, k * yhat, lw=0.8, label="model", alpha=0.85)
+    a1.set_ylabel(f"output ({unit})")
+    a1.legend(loc="upper right")
+    a1.set_title("Measured and model output (simulation mode)")
+    a2.plot(t, u, lw=0.8, color="0.3")
+    a2.set_ylabel("input")
+    a2.set_xlabel("time (s)")
+    fig.tight_layout()
+    _save(fig, d / "time.png")
+    plt.close(fig)
+    figs.append(("time.png", "Measured and model output over time, with the input"))
+    # Loops.
+    fig, ax = plt.subplots(figsize=(6.5, 5.5))
+    ax.plot(u, k * y, lw=0.6, label="measured")
+    ax.plot(u, k * yhat, lw=0.6, label="model", alpha=0.85)
+    ax.set_xlabel("input")
+    ax.set_ylabel(f"output ({unit})")
+    ax.set_title("Loops: output vs input")
+    ax.legend()
+    fig.tight_layout()
+    _save(fig, d / "loop.png")
+    plt.close(fig)
+    figs.append(("loop.png", "Hysteresis loops, measured and model"))
+    # Residual with u and du/dt.
+    dt = 1.0 / st.fs
+    du = np.gradient(u, dt) if u.size > 1 else np.zeros_like(u)
+    fig, (b1, b2, b3) = plt.subplots(3, 1, figsize=(10, 6.5), sharex=True)
+    b1.plot(t, ke * e, lw=0.7, color="C3")
+    b1.axhline(0, color="0.5", lw=0.5)
+    b1.set_ylabel(f"residual ({unite})")
+    b1.set_title("Residual (measured − model) with the input and its rate")
+    for s in st.segments:  # shade segment boundaries so "where" is visible
+        b1.axvline(s.t0, color="0.8", lw=0.5)
+    b2.plot(t, u, lw=0.7, color="0.3")
+    b2.set_ylabel("u")
+    b3.plot(t, du, lw=0.7, color="0.3")
+    b3.set_ylabel("du/dt (1/s)")
+    b3.set_xlabel("time (s)")
+    fig.tight_layout()
+    _save(fig, d / "residual.png")
+    plt.close(fig)
+    figs.append(("residual.png", "Residual vs time, input and input rate"))
+    # Spectra.
+    n = y.size
+    f = np.fft.rfftfreq(n, dt)
+    win = np.hanning(n)
+    amp = lambda x: 2.0 * np.abs(np.fft.rfft((x - x.mean()) * win)) / max(win.sum(), 1e-300)  # noqa: E731
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    ax.semilogy(f[1:], k * amp(y)[1:] + 1e-30, lw=0.7, label="measured")
+    ax.semilogy(f[1:], k * amp(e)[1:] + 1e-30, lw=0.7, label="residual", color="C3")
+    if f.size > 2 and f[1] > 0:
+        ax.set_xscale("log")
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel(f"amplitude ({unit})")
+    ax.set_title("Amplitude spectra (Hann window)")
+    ax.legend()
+    fig.tight_layout()
+    _save(fig, d / "spectrum.png")
+    plt.close(fig)
+    figs.append(("spectrum.png", "Amplitude spectrum of the measured output and the residual"))
+    # Correlations with bounds.
+    cors = [st.auto, st.cross, *st.higher.values()]
+    fig, axs = plt.subplots(2, 3, figsize=(12, 6))
+    for ax, c in zip(axs.ravel(), cors):
+        lag_ms = c.lags * c.dt * 1e3
+        ax.axhspan(-c.bound, c.bound, color="C0", alpha=0.15, lw=0)
+        ax.vlines(lag_ms, 0, c.values, color="C3" if c.significant else "C0", lw=1.2)
+        ax.plot(lag_ms, c.values, ".", color="C3" if c.significant else "C0", ms=3)
+        ax.axhline(0, color="0.4", lw=0.5)
+        ax.set_title({"auto": "residual autocorrelation", "cross": "residual–input cross-corr."}.get(c.name, c.name),
+                     fontsize=9)
+        ax.set_xlabel("lag (ms)", fontsize=8)
+    for ax in axs.ravel()[len(cors):]:
+        ax.axis("off")
+    fig.suptitle("Residual tests; shaded: 99 % confidence region (red: significant)")
+    fig.tight_layout()
+    _save(fig, d / "correlation.png")
+    plt.close(fig)
+    figs.append(("correlation.png", "Whiteness, cross-correlation and higher-order tests with 99 % bounds"))
+    if ladder:
+        labels = [str(r.get("model", "?")) for r in ladder]
+        val = np.array([float(r.get("rmse", np.nan)) for r in ladder])
+        kk, uu = _scale(val[np.isfinite(val)] if np.isfinite(val).any() else np.array([1e-6]))
+        fig, ax = plt.subplots(figsize=(max(6, 1.4 * len(labels)), 4))
+        ax.bar(range(len(labels)), kk * val, color="C0", label="validation")
+        tr = [r.get("rmse_train") for r in ladder]
+        if any(x is not None for x in tr):
+            ax.plot(range(len(labels)), [kk * float(x) if x is not None else np.nan for x in tr], "o",
+                    color="C1", label="training")
+            ax.legend()
+        ax.set_xticks(range(len(labels)))
+        ax.set_xticklabels(labels, rotation=20, ha="right")
+        ax.set_ylabel(f"RMSE ({uu})")
+        ax.set_title("Error ladder: validation RMSE as effects are added")
+        for i, v in enumerate(val):
+            if np.isfinite(v):
+                ax.annotate(f"{kk * v:.3g}", (i, kk * v), ha="center", va="bottom", fontsize=8)
+        fig.tight_layout()
+        _save(fig, d / "ladder.png")
+        plt.close(fig)
+        figs.append(("ladder.png", "Error ladder"))
+    return figs
+
+
+def _fmt(x: Any) -> str:
+    if isinstance(x, (float, np.floating)):
+        return "n/a" if not np.isfinite(x) else f"{x:.4g}"
+    return html.escape(str(x))
+
+
+def _table(head: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    h = "".join(f"<th>{html.escape(c)}</th>" for c in head)
+    b = "".join("<tr>" + "".join(f"<td>{_fmt(c)}</td>" for c in r) + "</tr>" for r in rows)
+    return f"<table><tr>{h}</tr>{b}</table>"
+
+
+def _nm(x: float) -> float:
+    return x * 1e9
+
+
+def write_report(dir: str | os.PathLike, record, model_output: np.ndarray, stats,
+                 ladder: Sequence[Mapping[str, Any]] | None = None, diagnosis: Mapping[str, Any] | None = None,
+                 *, force: bool = False, title: str | None = None) -> Path:
+    """Write ``index.html`` and the PNG plots into ``dir`` (see the module docstring); return ``dir``."""
+    from ..cli.compare import findings  # the same plain-language findings as the terminal summary
+    t = np.asarray(record.t, float)
+    u = np.asarray(record.u, float)
+    y = np.asarray(record.y, float)
+    yhat = np.asarray(model_output, float)
+    if not (t.size == u.size == y.size == yhat.size) or t.size < 8:
+        raise HystError("report: record and model output must have the same length (at least 8 samples)")
+    d = prepare_dir(dir, force)
+    figs = _plots(d, t, u, y, yhat, stats, ladder)
+    st = stats
+    o = st.overall
+    parts = [f"<h1>{html.escape(title or 'hyst report')}</h1>",
+             f"<p>data: {html.escape(str(getattr(record, 'source', '')))} — {o.n} samples at {st.fs:.6g} Hz; "
+             f"output noise ≈ {_nm(st.noise_sigma):.3g} nm</p>"]
+    if diagnosis:
+        bl = diagnosis.get("baseline", {}) or {}
+        parts.append(f"<h2>Diagnosis</h2><p>baseline {html.escape(str(bl.get('model', '?')))}: RMSE "
+                     f"{_nm(float(bl.get('rmse', np.nan))):.4g} nm. Missing effect: "
+                     f"<b>{html.escape(str(diagnosis.get('missing', '?')))}</b></p>")
+        rows = [(c.get("effect"), _nm(float(c.get("rmse", np.nan))), c.get("improvement"), c.get("evidence", ""))
+                for c in diagnosis.get("candidates", [])]
+        parts.append(_table(["effect", "validation RMSE (nm)", "improvement", "evidence"], rows))
+    if ladder:
+        rows = [(r.get("model"), _nm(float(r.get("rmse", np.nan))),
+                 _nm(float(r["rmse_train"])) if r.get("rmse_train") is not None else "") for r in ladder]
+        parts.append("<h2>Error ladder</h2>" + _table(["model", "validation RMSE (nm)", "training RMSE (nm)"], rows))
+    parts.append("<h2>Findings</h2><ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in findings(st)) + "</ul>")
+    parts.append("<h2>Fit figures</h2>" + _table(
+        ["", "n", "RMSE (nm)", "NRMSE (%)", "fit (%)", "bias (nm)", "max (nm)"],
+        [("overall", o.n, _nm(o.rmse), 100 * o.nrmse, o.fit_percent, _nm(o.bias), _nm(o.max_abs))]))
+    parts.append("<h3>By time segment</h3>" + _table(
+        ["segment", "t0 (s)", "t1 (s)", "RMSE (nm)", "fit (%)", "bias (nm)"],
+        [(s.label, s.t0, s.t1, _nm(s.fit.rmse), s.fit.fit_percent, _nm(s.fit.bias)) for s in st.segments]))
+    parts.append("<h3>By branch</h3>" + _table(
+        ["branch", "n", "RMSE (nm)", "bias (nm)"],
+        [(k, f.n, _nm(f.rmse), _nm(f.bias)) for k, f in st.branches.items()]))
+    parts.append("<h3>By input level</h3>" + _table(
+        ["from", "to", "n", "RMSE (nm)", "bias (nm)"],
+        [(lo, hi, f.n, _nm(f.rmse), _nm(f.bias)) for lo, hi, f in st.levels]))
+    parts.append("<h3>By frequency band</h3>" + _table(
+        ["from (Hz)", "to (Hz)", "residual RMS (nm)", "measured RMS (nm)", "fit (%)"],
+        [(b.f_lo, b.f_hi, _nm(b.rmse), _nm(b.y_rms), b.fit_percent) for b in st.bands]))
+    parts.append("<h3>Residual tests (99 % bounds)</h3>" + _table(
+        ["test", "max |r|", "at lag (ms)", "bound", "lags outside (%)", "verdict"],
+        [(c.name, c.max_abs, c.lag_at_max * c.dt * 1e3, c.bound, 100 * c.frac_outside,
+          "significant" if c.significant else "ok") for c in [st.auto, st.cross, *st.higher.values()]]))
+    for name, caption in figs:
+        parts.append(f"<figure><img src='{name}' alt='{html.escape(caption)}'>"
+                     f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+    css = ("body{font-family:sans-serif;max-width:1200px;margin:1em auto}table{border-collapse:collapse;"
+           "margin:.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}img{max-width:100%}")
+    doc = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title or 'hyst report')}"
+           f"</title><style>{css}</style></head><body>{''.join(parts)}</body></html>\n")
+    fd, tmp = tempfile.mkstemp(prefix=".index.", suffix=".html", dir=d)
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        fh.write(doc)
+    os.replace(tmp, d / "index.html")
+    return d

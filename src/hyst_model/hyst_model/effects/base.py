@@ -1,0 +1,234 @@
+"""The Effect API: a named physical effect that wraps a model into a new model of the same protocol.
+
+An effect is one missing piece of physics (creep, an input delay, a drifting offset, ...). It is composed with a
+base hysteresis model (:func:`hyst_model.effects.compose`) into a :class:`ComposedModel`, which follows the
+:class:`hyst_model.model.Model` protocol, so every estimator, params file and command works on it unchanged.
+
+Writing an effect
+-----------------
+Subclass :class:`Effect` and set the class attributes
+
+* ``name`` — registry key used on the command line and in params files (``creep``); parameters are namespaced
+  with it (``creep.gain``);
+* ``summary`` — one line; ``physics`` — a paragraph a lab user understands;
+* ``kind`` — where it acts: ``"input"`` (transforms u before the inner model: :meth:`Effect.input`),
+  ``"output"`` (transforms the inner model's y: :meth:`Effect.output`), ``"wrap"`` (sees the whole inner
+  structure: override :meth:`Effect.apply`) or ``"base"`` (replaces how the base model itself is simulated,
+  e.g. adding rate terms to BW: override :meth:`Effect.apply` and use ``inner.model``/``inner.theta``);
+
+and implement
+
+* :meth:`Effect.params` — local parameter names (without the prefix), defaults and bounds, SI units. The
+  defaults must make the effect (almost) the identity, so base + effect starts where the base alone ended;
+* :meth:`Effect.start` (optional) — data-driven initial values from the base model's residual;
+* :meth:`Effect.signature` — the residual test for this effect: ``(score, evidence)`` with score in [0, 1]
+  (how strongly the base model's residual looks like this effect) and one sentence of evidence in words.
+
+Fixed configuration (``dt``, ``u_scale``, ``y_scale``, ...) reaches the effect through its constructor
+``Effect(config)``; anything it needs to rebuild itself goes back out through :meth:`Effect.config`.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from ..errors import EffectError
+from ..model import Model, Param
+
+__all__ = ["Effect", "Inner", "ComposedModel", "KINDS"]
+
+#: Where an effect acts on the model structure.
+KINDS: tuple[str, ...] = ("input", "output", "wrap", "base")
+
+
+@dataclass(frozen=True)
+class Inner:
+    """The model an effect wraps, with its parameters already bound.
+
+    Attributes
+    ----------
+    simulate : callable
+        ``simulate(t, u) -> y`` in SI units: the inner structure (base model plus the effects composed before
+        this one) at its bound parameters.
+    model : Model
+        The innermost base model (e.g. :class:`hyst_model.model.MBWModel`).
+    theta : ndarray
+        The base model's packed parameters (``model.params()`` order).
+    """
+
+    simulate: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    model: Model
+    theta: np.ndarray
+
+    def __call__(self, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return self.simulate(t, u)
+
+
+class Effect:
+    """Base class of every effect (built-in or from a user's ``--effect-module``).
+
+    Parameters
+    ----------
+    config : mapping, optional
+        Fixed configuration of the model being extended: ``dt`` (s), ``u_scale`` (V per model unit),
+        ``y_scale`` (m per model unit), plus any effect-specific keys ``<name>.<key>`` it wrote itself.
+    """
+
+    name: ClassVar[str] = "effect"
+    summary: ClassVar[str] = ""
+    physics: ClassVar[str] = ""
+    kind: ClassVar[str] = "output"
+    #: Effects this one must not be combined with (same physics twice → unidentifiable).
+    conflicts: ClassVar[tuple[str, ...]] = ()
+    #: Base model names this effect applies to; empty = any.
+    bases: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self, config: Mapping[str, object] | None = None):
+        cfg = dict(config or {})
+        self.dt = float(cfg.get("dt", 1e-3) or 1e-3)
+        self.u_scale = float(cfg.get("u_scale", 1.0) or 1.0)
+        self.y_scale = float(cfg.get("y_scale", 1.0) or 1.0)
+        self._config = cfg
+
+    # --- what the effect is -------------------------------------------------------------------------------
+    def params(self) -> tuple[Param, ...]:
+        """Local parameters (names without the ``<name>.`` prefix), defaults ≈ identity, SI units."""
+        return ()
+
+    def config(self) -> dict[str, float | str]:
+        """Non-fitted settings to store in a params file as ``<name>.<key>`` (none by default)."""
+        return {}
+
+    # --- how it transforms --------------------------------------------------------------------------------
+    def input(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Input-side effects: the input the inner model actually sees (V)."""
+        return u
+
+    def output(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Output-side effects: the measured output (m) given the inner model's output ``y``."""
+        return y
+
+    def apply(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray, inner: Inner) -> np.ndarray:
+        """Output of the extended structure for local parameters ``theta``.
+
+        The default follows :attr:`kind`: ``input`` → ``inner(t, input(u))``; ``output`` →
+        ``output(u, inner(t, u))``. ``wrap`` and ``base`` effects override this.
+        """
+        if self.kind == "input":
+            return inner(t, self.input(theta, t, u))
+        if self.kind == "output":
+            return self.output(theta, t, u, inner(t, u))
+        raise NotImplementedError(f"effect {self.name!r} of kind {self.kind!r} must implement apply()")
+
+    # --- how it is found ----------------------------------------------------------------------------------
+    def start(self, t: np.ndarray, u: np.ndarray, y: np.ndarray, residual: np.ndarray) -> dict[str, float]:
+        """Initial values (local names) from the data and the base model's residual ``y - y_base``."""
+        return {}
+
+    def signature(self, t: np.ndarray, u: np.ndarray, residual: np.ndarray, dt: float) -> tuple[float, str]:
+        """How much the residual looks like this effect: ``(score in [0, 1], evidence sentence)``."""
+        return 0.0, "no residual test"
+
+    # --- helpers ------------------------------------------------------------------------------------------
+    def check(self, base: Model, others: Sequence["Effect"]) -> None:
+        """Raise :class:`EffectError` if this effect cannot extend ``base`` together with ``others``."""
+        if self.bases and getattr(base, "name", "") not in self.bases:
+            raise EffectError(f"effect {self.name!r} applies to base {'/'.join(self.bases)} only, "
+                              f"not {getattr(base, 'name', '?')!r}")
+        for o in others:
+            if o.name == self.name:
+                raise EffectError(f"effect {self.name!r} is listed twice")
+            if o.name in self.conflicts or self.name in o.conflicts:
+                raise EffectError(f"effects {o.name!r} and {self.name!r} model the same physics; use one of them")
+
+    def describe(self) -> str:
+        """Multi-line help text: name, summary, physics and parameters."""
+        lines = [f"{self.name}: {self.summary}", f"  {self.physics}"]
+        for p in self.params():
+            lines.append(f"  {self.name}.{p.name} [{p.unit or '-'}] in [{p.lower:g}, {p.upper:g}]: {p.doc}")
+        return "\n".join(lines)
+
+
+class ComposedModel(Model):
+    """A base model extended by effects; the same :class:`~hyst_model.model.Model` protocol.
+
+    Effects are applied in order, the first one innermost: ``compose(mbw, ["delay", "creep"])`` simulates
+    ``creep(delay(mbw))``. Packed parameters are the base's followed by each effect's, namespaced
+    ``<effect>.<param>``.
+
+    Attributes
+    ----------
+    base : Model
+        Innermost base model.
+    effects : list of Effect
+        In application order.
+    """
+
+    def __init__(self, base: Model, effects: Sequence[Effect]):
+        if isinstance(base, ComposedModel):  # flatten so .base is always the innermost model
+            effects = list(base.effects) + list(effects)
+            base = base.base
+        self.base = base
+        self.effects = list(effects)
+        for i, e in enumerate(self.effects):
+            e.check(base, self.effects[:i])
+        bases = [e for e in self.effects if e.kind == "base"]
+        if len(bases) > 1:
+            raise EffectError(f"effects {bases[0].name!r} and {bases[1].name!r} both replace the base model")
+        self.name = "+".join([base.name] + [e.name for e in self.effects])
+        ps = list(base.params())
+        self._slices = []
+        n0 = len(ps)
+        start = n0
+        for e in self.effects:
+            local = e.params()
+            for p in local:
+                ps.append(Param(f"{e.name}.{p.name}", p.default, p.lower, p.upper, p.unit, p.doc))
+            self._slices.append(slice(start, start + len(local)))
+            start += len(local)
+        self._nbase = n0
+        self._params = tuple(ps)
+
+    def params(self) -> tuple[Param, ...]:
+        return self._params
+
+    def split(self, theta: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        """Base parameters and each effect's local parameters from a packed vector."""
+        theta = np.asarray(theta, dtype=np.float64)
+        return theta[: self._nbase], [theta[s] for s in self._slices]
+
+    def simulate(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+        tb, tes = self.split(theta)
+        base = self.base
+        order = sorted(range(len(self.effects)), key=lambda i: self.effects[i].kind != "base")
+        f: Callable[[np.ndarray, np.ndarray], np.ndarray] = lambda tt, uu: base.simulate(tb, tt, uu)  # noqa: E731
+        for i in order:
+            f = _bind(self.effects[i], tes[i], Inner(f, base, tb))
+        return f(np.asarray(t, dtype=np.float64), np.asarray(u, dtype=np.float64))
+
+    def config(self) -> dict[str, float | str]:
+        cfg = dict(self.base.config())
+        for e in self.effects:
+            cfg.update({f"{e.name}.{k}": v for k, v in e.config().items()})
+        return cfg
+
+    def start(self, t: np.ndarray, u: np.ndarray, y: np.ndarray, theta_base: np.ndarray) -> np.ndarray:
+        """Packed start vector: fitted base parameters plus each effect's data-driven start (clipped to bounds)."""
+        theta = self.theta0.copy()
+        theta[: self._nbase] = theta_base
+        residual = y - self.base.simulate(theta_base, t, u)
+        lo, hi = self.bounds
+        for e, s in zip(self.effects, self._slices):
+            guess = e.start(t, u, y, residual) or {}
+            local = [p.name for p in e.params()]
+            for k, v in guess.items():
+                if k in local and np.isfinite(v):
+                    theta[s.start + local.index(k)] = v
+        return np.clip(theta, lo, hi)
+
+
+def _bind(effect: Effect, theta: np.ndarray, inner: Inner) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    return lambda tt, uu: effect.apply(theta, tt, uu, inner)

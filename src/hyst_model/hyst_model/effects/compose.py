@@ -1,0 +1,105 @@
+"""Compose a base model with named effects; the effect registry and user effect modules.
+
+:data:`EFFECTS` maps effect names to classes. Built-ins register here; H5b's ``dynamics`` joins when its module is
+importable; a user's ``--effect-module path.py`` adds its :class:`~hyst_model.effects.base.Effect` subclasses
+through :func:`register` (see :mod:`hyst_model.effects.user_module`).
+"""
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping, Sequence
+
+from ..errors import EffectError
+from ..model import Model
+from .base import ComposedModel, Effect
+
+__all__ = ["EFFECTS", "compose", "register", "effect_names"]
+
+#: name → Effect subclass. Filled by :func:`_load_builtins` at import and by :func:`register`.
+EFFECTS: dict[str, type[Effect]] = {}
+
+_BUILTIN_MODULES = ("creep", "asymmetry", "delay", "drift", "saturation", "rate", "dynamics")
+
+
+def register(cls: type[Effect], *, replace: bool = False) -> type[Effect]:
+    """Add an effect class to :data:`EFFECTS` (usable as a decorator).
+
+    Raises
+    ------
+    EffectError
+        ``cls`` is not an Effect subclass, has no usable name, or the name is taken (unless ``replace``).
+    """
+    if not (isinstance(cls, type) and issubclass(cls, Effect)) or cls is Effect:
+        raise EffectError(f"{cls!r} is not a subclass of hyst_model.effects.Effect")
+    name = getattr(cls, "name", "")
+    if not isinstance(name, str) or not name.isidentifier() or name == "effect":
+        raise EffectError(f"effect class {cls.__name__} needs a class attribute name = '<identifier>'")
+    if name in EFFECTS and EFFECTS[name] is not cls and not replace:
+        raise EffectError(f"an effect called {name!r} already exists ({EFFECTS[name].__module__}); rename yours")
+    if cls.kind not in ("input", "output", "wrap", "base"):
+        raise EffectError(f"effect {name!r}: kind must be input, output, wrap or base, not {cls.kind!r}")
+    EFFECTS[name] = cls
+    return cls
+
+
+def effect_names() -> list[str]:
+    """Registered effect names, sorted."""
+    return sorted(EFFECTS)
+
+
+def compose(model: Model, names: Sequence[str | Effect], config: Mapping[str, object] | None = None) -> Model:
+    """Extend ``model`` by the named effects, first name innermost; returns a :class:`ComposedModel`.
+
+    Parameters
+    ----------
+    model : Model
+        Base model (or an already composed model, which is extended further).
+    names : sequence of str or Effect
+        Effect names from :data:`EFFECTS` (or ready Effect instances).
+    config : mapping, optional
+        Fixed configuration (``dt``, ``u_scale``, ``y_scale``, ``<effect>.<key>`` ...); the base model's own
+        config fills what is missing.
+
+    Raises
+    ------
+    EffectError
+        Unknown name, an effect listed twice, two effects modelling the same physics, or an effect that does
+        not apply to this base model.
+    """
+    cfg = dict(model.config())
+    cfg.update(dict(config or {}))
+    effects: list[Effect] = []
+    for n in names:
+        if isinstance(n, Effect):
+            effects.append(n)
+            continue
+        key = str(n).strip()
+        if key not in EFFECTS:
+            raise EffectError(f"unknown effect {key!r}; choose from {', '.join(effect_names())} "
+                              "(or add your own with --effect-module)")
+        try:
+            effects.append(EFFECTS[key](cfg))
+        except EffectError:
+            raise
+        except Exception as err:  # a user effect's constructor may fail in any way
+            raise EffectError(f"effect {key!r} cannot be constructed: {type(err).__name__}: {err}") from err
+    return ComposedModel(model, effects)
+
+
+def _load_builtins() -> None:
+    for mod in _BUILTIN_MODULES:
+        try:
+            m = importlib.import_module(f"{__package__}.{mod}")
+        except ImportError:  # e.g. dynamics not written yet: the rest must keep working
+            continue
+        except Exception:  # noqa: BLE001 - a broken sibling module must not take every effect down
+            if mod in ("creep", "asymmetry", "delay", "drift", "saturation", "rate"):
+                raise
+            continue
+        for obj in vars(m).values():
+            if isinstance(obj, type) and issubclass(obj, Effect) and obj is not Effect \
+                    and obj.__module__ == m.__name__ and getattr(obj, "name", "effect") != "effect":
+                register(obj, replace=True)
+
+
+_load_builtins()

@@ -1,0 +1,109 @@
+"""Creep: the slow, logarithmic-in-time extra displacement of a piezo stack after a change.
+
+After a voltage step a piezo keeps extending for seconds to minutes, roughly linearly in log(time)
+(Jung & Gweon, Rev. Sci. Instrum. 71, 2000; Kuhnen's creep operator). The MBW's δ terms relax with one time
+constant only (../shared/thesis/README.md, "The δ terms already relax"), so a base model leaves a residual that
+keeps growing after each step. The creep operator here acts on the hysteretic displacement x = y_inner with
+first-order lags c_i of log-spaced time constants τ_i (0.01 s … 300 s, ``PER_DECADE`` per decade):
+
+    y = x − gain · (n / PER_DECADE) · Σ_i w_i (x − c_i),   τ_i ċ_i = x − c_i,   w_i ∝ (τ_i / 1 s)^tilt, Σ w_i = 1
+
+At rest every c_i equals x, so a long-held input reads exactly the base model's static map (quasi-static data
+fix the hysteresis, creep adds only the slow approach to it). After a step Δ the output falls short by
+``gain · Δ`` per remaining decade of τ and recovers linearly in log time (tilt = 0): ``gain`` is the creep per
+decade of time as a fraction of the step. Lags start at rest at x[0] and are discretised exactly for a held
+input, with the record's own sample time (so decimated screening copies work unchanged).
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import lfilter
+
+from ..model import Param
+from .base import Effect
+from .signals import holds, sample_time
+
+__all__ = ["Creep", "creep_lags", "TAUS", "PER_DECADE"]
+
+PER_DECADE = 3
+#: Time constants of the creep operator (s): 0.01 s … 300 s.
+TAUS = np.logspace(-2, np.log10(300.0), int(round(PER_DECADE * np.log10(300.0 / 0.01))) + 1)
+
+
+def creep_lags(t: np.ndarray, x: np.ndarray, taus: np.ndarray = TAUS) -> np.ndarray:
+    """States c_i (shape (len(taus), n)) of first-order lags driven by ``x``, at rest at ``x[0]``."""
+    x = np.asarray(x, dtype=np.float64)
+    dt = sample_time(t)
+    out = np.empty((taus.size, x.size))
+    for i, tau in enumerate(taus):
+        a = np.exp(-dt / tau)
+        out[i], _ = lfilter([1.0 - a], [1.0, -a], x, zi=[a * x[0]])
+    return out
+
+
+def _weights(tilt: float, taus: np.ndarray = TAUS) -> np.ndarray:
+    w = np.exp(tilt * np.log(taus))
+    return w / w.sum()
+
+
+def creep_term(t: np.ndarray, x: np.ndarray, tilt: float = 0.0) -> np.ndarray:
+    """(n / PER_DECADE) · Σ w_i (x − c_i): the creep deficit per unit gain."""
+    c = creep_lags(t, x)
+    return (TAUS.size / PER_DECADE) * (x - _weights(tilt) @ c)
+
+
+class Creep(Effect):
+    """Creep operator on the hysteretic displacement: log-spaced first-order lags, zero static contribution."""
+
+    name = "creep"
+    summary = "slow extra displacement after changes, growing linearly in log time (piezo creep)"
+    physics = ("After a step the stage keeps moving for seconds to minutes, about the same amount per decade of "
+               "time; modelled as first-order lags with time constants 0.01-300 s acting on the displacement.")
+    kind = "output"
+
+    def params(self):
+        return (Param("gain", 0.0, -0.1, 0.3, "1/decade", "creep per decade of time, fraction of a step"),
+                Param("tilt", 0.0, -0.3, 0.3, "", "weight of slow vs fast lags: w_i ∝ τ_i^tilt"))
+
+    def output(self, theta, t, u, y):
+        gain, tilt = float(theta[0]), float(theta[1])
+        if gain == 0.0:
+            return y
+        return y - gain * creep_term(t, y, tilt)
+
+    def start(self, t, u, y, residual):
+        # residual ≈ −gain · creep_term(x) with x ≈ the base model's output = y − residual.
+        b = creep_term(np.asarray(t, float), np.asarray(y, float) - residual)
+        b = b - b.mean()
+        den = float(b @ b)
+        if den <= 0:
+            return {}
+        return {"gain": float(-b @ (residual - residual.mean()) / den)}
+
+    def signature(self, t, u, residual, dt):
+        hs = [h for h in holds(u, dt, min_seconds=1.0) if h[2] != 0.0]
+        if not hs:
+            return 0.0, "no holds of at least 1 s after a step in this record, so creep cannot be seen directly"
+        slopes, fits = [], []
+        for a, b, step in hs:
+            tt = (np.arange(b - a) + 1) * dt
+            m = tt >= 0.05  # the base's own fast relaxation is over by then
+            if m.sum() < 10:
+                continue
+            lt = np.log10(tt[m])
+            r = residual[a:b][m]
+            A = np.vstack([np.ones_like(lt), lt]).T
+            coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+            rr = r - A @ coef
+            r2 = 1.0 - float(rr @ rr) / max(float(((r - r.mean()) ** 2).sum()), 1e-300)
+            slopes.append(coef[1] / step)
+            fits.append(max(r2, 0.0))
+        if not slopes:
+            return 0.0, "holds too short to see creep"
+        s = np.array(slopes)
+        same = float(np.mean(np.sign(s) == np.sign(np.median(s))))
+        score = float(np.clip(np.median(fits) * (2 * same - 1), 0.0, 1.0))
+        per_decade = float(np.median(np.abs(s))) * 1e9
+        return score, (f"after each step the residual keeps moving the same way relative to the step for seconds, "
+                       f"linearly in log time (median R² {np.median(fits):.2f} over {len(slopes)} holds, "
+                       f"{per_decade:.3g} nm per volt of step per decade of time, consistent in {same:.0%})")

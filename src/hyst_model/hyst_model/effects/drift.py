@@ -1,0 +1,81 @@
+"""Drift: an input-independent slow change of the output offset (thermal expansion, sensor drift).
+
+Temperature changes of the stage or the sensor electronics move the reading without any input change: a trend,
+slow thermal swings and a random walk. The effect adds a piecewise-linear spline in time, zero at the start of
+the record (the base model's ``offset`` carries the constant), with ``K`` knots evenly spread over the
+identification span (``drift.knots``, default 5; ``drift.span`` in s is stored with the fit):
+
+    y = y_inner + d(t),   d = linear interpolation of (0, c1, …, cK) at t_j = t_0 + j·span/K,
+    continued with the last segment's slope beyond the span
+
+(c_j in metres). Drift cannot be predicted from the input: beyond the span only its trend carries on, so keep
+``knots`` small (each segment several seconds long) when the model must predict held-out data.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Param
+from .base import Effect
+from .signals import corr, smooth
+
+__all__ = ["Drift"]
+
+
+class Drift(Effect):
+    """Piecewise-linear offset drift in time."""
+
+    name = "drift"
+    summary = "slow input-independent offset drift (temperature, sensor electronics)"
+    physics = ("The reading wanders slowly over the record even where the input repeats itself; the model's "
+               "error at the same input level differs between early and late in the record.")
+    kind = "output"
+
+    def __init__(self, config=None):
+        super().__init__(config)
+        self.knots = int(float(self._config.get("drift.knots", 5)))
+        self.span = float(self._config.get("drift.span", 0.0) or 0.0)
+
+    def params(self):
+        b = float(self._config.get("offset_bound", 1e-3)) + 50.0 * self.y_scale
+        return tuple(Param(f"c{j}", 0.0, -b, b, "m", f"offset change at knot {j} of {self.knots}")
+                     for j in range(1, self.knots + 1))
+
+    def config(self):
+        return {"knots": float(self.knots), "span": self.span}
+
+    def _nodes(self, t):
+        span = self.span if self.span > 0 else float(t[-1] - t[0])
+        return float(t[0]) + np.linspace(0.0, span, self.knots + 1)
+
+    def output(self, theta, t, u, y):
+        vals = np.concatenate([[0.0], np.asarray(theta, float)])
+        nodes = self._nodes(t)
+        d = np.interp(t, nodes, vals)
+        beyond = t > nodes[-1]
+        if beyond.any():  # continue the last segment's trend past the identification span
+            slope = (vals[-1] - vals[-2]) / (nodes[-1] - nodes[-2])
+            d[beyond] += slope * (t[beyond] - nodes[-1])
+        return y + d
+
+    def start(self, t, u, y, residual):
+        if self.span <= 0:
+            self.span = float(t[-1] - t[0])
+        nodes = self._nodes(t)
+        # Least squares of the residual on the hat functions (first one dropped: the offset is the base's).
+        eye = np.eye(self.knots + 1)
+        B = np.vstack([np.interp(t, nodes, eye[j]) for j in range(self.knots + 1)]).T
+        coef, *_ = np.linalg.lstsq(B, residual, rcond=None)
+        c = coef[1:] - coef[0]
+        return {f"c{j}": float(c[j - 1]) for j in range(1, self.knots + 1)}
+
+    def signature(self, t, u, residual, dt):
+        n = residual.size
+        slow = smooth(residual, max(1, int(round(2.0 / dt))))  # 2 s moving average
+        tot = float(((residual - residual.mean()) ** 2).sum())
+        r2 = float(((slow - slow.mean()) ** 2).sum()) / tot if tot > 0 else 0.0
+        cu = abs(corr(slow, smooth(u, max(1, int(round(2.0 / dt))))))
+        score = float(np.clip(r2 * (1.0 - cu), 0.0, 1.0))
+        span = float(np.ptp(slow)) if n else 0.0
+        return score, (f"the residual wanders slowly ({min(r2, 1.0):.0%} of it is slower than 2 s) and does not "
+                       f"follow the input (corr {cu:.2f}); the reading drifts by {span * 1e9:.3g} nm over the record")

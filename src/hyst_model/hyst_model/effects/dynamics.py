@@ -1,0 +1,412 @@
+"""Dynamics: linear second-order (mass-spring-damper) dynamics around the hysteresis, in the two structures a lab
+meets.
+
+``series`` (config ``dynamics.structure: series``, the default) — hysteresis followed by the stage's resonance:
+the inner model's output ``x`` drives a unit-DC-gain second-order low-pass
+
+    ÿ + 2ζω_n ẏ + ω_n² y = ω_n² x,     ω_n = 2π·fn,
+
+discretised exactly for an input that is linear between samples (first-order hold, so no artificial one-sample
+delay), starting at rest at ``x[0]``. With ``fn`` near Nyquist and ζ ≈ 0.7 it is almost the identity. This is a
+piezo stage whose flexure resonance (hundreds of Hz to kHz) is excited by fast commands: the loop tilts with
+frequency, step responses ring.
+
+``feedback`` (config ``dynamics.structure: feedback``) — a hysteretic restoring force inside a mass-spring-damper,
+as in the Bouc-Wen benchmark (Noël & Schoukens 2016, ../shared/data/boucwen_benchmark):
+
+    m ÿ + c ẏ + k y + z = u,     ż = α ẏ − β(γ |ẏ| z + δ ẏ |z|)      (Bouc-Wen, ν = 1)
+
+Divided by the small-signal stiffness k + α (the tangent stiffness at z = 0) it is written with
+SI parameters that are each meaningful on their own:
+
+    fn    = sqrt((k+α)/m) / 2π           small-signal natural frequency (Hz)
+    zeta  = c / (2 sqrt((k+α) m))        damping ratio
+    gain  = 1 / (k+α)                    small-signal compliance (m per input unit)
+    share = α / (k+α)                    hysteretic part of the stiffness (0 = linear spring)
+    bg, bd = β γ, β δ                    Bouc-Wen loop shape (1/m)
+
+so that with ``w = z/(k+α)`` (m)
+
+    ÿ = ω_n² (gain·u − (1 − share)·y − w) − 2ζω_n ẏ,     ẇ = share·ẏ − bg |ẏ| w − bd ẏ |w|.
+
+The benchmark's values are fn = 35.59 Hz, ζ = 1.12 %, gain = 1e-5 m/N, share = 0.5, bg = 800 /m, bd = −1100 /m.
+The state is integrated with classical RK4 at ``dynamics.substeps`` (default 20) steps per sample (the benchmark's
+guideline: 15 kHz for 750 Hz data), numba-compiled. The input between samples is interpolated linearly
+(``dynamics.interp: linear``) or band-limited (``fft``: exact for periodic records such as multisines). In this
+structure the effect *replaces* the base model (kind ``base``): the restoring force carries the hysteresis, and
+only the base's fitted ``offset`` (if it has one) is kept.
+
+Which structure fits a given actuator is an empirical question: :func:`choose_structure` fits both and keeps
+the one with the lower validation RMSE.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.linalg import expm
+
+from ..errors import EffectError
+from ..model import Param
+from .base import Effect
+from .signals import corr, holds, sample_time, smooth
+
+__all__ = ["DynamicsEffect", "series_filter", "msd_bw_simulate", "upsample", "choose_structure",
+           "StructureChoice", "BENCHMARK_TRUTH", "STRUCTURES"]
+
+STRUCTURES = ("series", "feedback")
+
+#: The Bouc-Wen benchmark system (Noël & Schoukens 2016, Table 1) in this effect's ``feedback`` parameters.
+BENCHMARK_TRUTH: dict[str, float] = {
+    "fn": float(np.sqrt(1e5 / 2.0) / (2 * np.pi)),  # 35.59 Hz
+    "zeta": float(10.0 / (2.0 * np.sqrt(1e5 * 2.0))),  # 1.118 %
+    "gain": 1e-5,  # m/N
+    "share": 0.5,
+    "bg": 1e3 * 0.8,
+    "bd": 1e3 * -1.1,
+}
+
+
+# ------------------------------------------------------------------------------------------------ series
+def _foh_matrices(fn: float, zeta: float, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact discretisation of ωn²/(s²+2ζωn s+ωn²) for a piecewise-linear input: Φ, Γ1, Γ2 (see series_filter)."""
+    wn = 2.0 * np.pi * fn
+    M = np.zeros((4, 4))
+    M[0, 1] = 1.0
+    M[1, 0] = -wn * wn
+    M[1, 1] = -2.0 * zeta * wn
+    M[1, 2] = wn * wn
+    M[2, 3] = 1.0  # input slope state
+    E = expm(M * dt)
+    return E[:2, :2].copy(), E[:2, 2].copy(), E[:2, 3].copy() / dt
+
+
+@njit(cache=True)
+def _series_run(phi: np.ndarray, g1: np.ndarray, g2: np.ndarray, x: np.ndarray) -> np.ndarray:
+    n = x.size
+    y = np.empty(n)
+    if n == 0:
+        return y
+    p = x[0]
+    v = 0.0
+    y[0] = p
+    for k in range(n - 1):
+        dx = x[k + 1] - x[k]
+        pn = phi[0, 0] * p + phi[0, 1] * v + g1[0] * x[k] + g2[0] * dx
+        vn = phi[1, 0] * p + phi[1, 1] * v + g1[1] * x[k] + g2[1] * dx
+        p, v = pn, vn
+        y[k + 1] = p
+    return y
+
+
+def series_filter(x: np.ndarray, fn: float, zeta: float, dt: float) -> np.ndarray:
+    """Pass ``x`` through the unit-DC-gain second-order low-pass (fn Hz, damping ζ), at rest at ``x[0]``.
+
+    First-order-hold discretisation: ``s_{k+1} = Φ s_k + Γ1 x_k + Γ2 (x_{k+1} − x_k)`` for the state
+    s = (y, ẏ); exact when x is linear between samples.
+    """
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    phi, g1, g2 = _foh_matrices(float(fn), float(zeta), float(dt))
+    return _series_run(phi, g1, g2, x)
+
+
+# ---------------------------------------------------------------------------------------------- feedback
+@njit(cache=True, inline="always")
+def _rhs(p: np.ndarray, uu: float, y: float, v: float, w: float) -> tuple[float, float, float]:
+    wn = 2.0 * np.pi * p[0]
+    acc = wn * wn * (p[2] * uu - (1.0 - p[3]) * y - w) - 2.0 * p[1] * wn * v
+    dw = p[3] * v - p[4] * abs(v) * w - p[5] * v * abs(w)
+    return v, acc, dw
+
+
+@njit(cache=True)
+def msd_bw_simulate(p: np.ndarray, ufine: np.ndarray, substeps: int, dt: float,
+                    y0: float = 0.0, v0: float = 0.0, w0: float = 0.0) -> np.ndarray:
+    """Integrate the mass-spring-damper with Bouc-Wen restoring force (RK4, ``substeps`` per sample).
+
+    Parameters
+    ----------
+    p : ndarray, shape (6,)
+        ``(fn, zeta, gain, share, bg, bd)``, see the module docstring.
+    ufine : ndarray, shape (2·substeps·(n−1) + 1,)
+        Input on the half-substep grid (RK4 needs the midpoints): ``ufine[2·substeps·k]`` is sample k.
+    substeps : int
+        RK4 steps per sample period.
+    dt : float
+        Sample period (s).
+    y0, v0, w0 : float
+        Initial displacement (m), velocity (m/s) and hysteretic displacement w = z/(k+α) (m).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Displacement at the sample instants (m); non-finite if the parameters make it diverge.
+    """
+    m2 = 2 * substeps
+    n = (ufine.size - 1) // m2 + 1
+    h = dt / substeps
+    out = np.empty(n)
+    y, v, w = y0, v0, w0
+    out[0] = y
+    for k in range(n - 1):
+        base = k * m2
+        for j in range(substeps):
+            i = base + 2 * j
+            u0, um, u1 = ufine[i], ufine[i + 1], ufine[i + 2]
+            k1y, k1v, k1w = _rhs(p, u0, y, v, w)
+            k2y, k2v, k2w = _rhs(p, um, y + 0.5 * h * k1y, v + 0.5 * h * k1v, w + 0.5 * h * k1w)
+            k3y, k3v, k3w = _rhs(p, um, y + 0.5 * h * k2y, v + 0.5 * h * k2v, w + 0.5 * h * k2w)
+            k4y, k4v, k4w = _rhs(p, u1, y + h * k3y, v + h * k3v, w + h * k3w)
+            y += h / 6.0 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
+            v += h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+            w += h / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
+        out[k + 1] = y
+        if not np.isfinite(y):
+            for r in range(k + 2, n):
+                out[r] = np.nan
+            break
+    return out
+
+
+def upsample(u: np.ndarray, factor: int, method: str = "linear") -> np.ndarray:
+    """Input on a grid ``factor`` times finer (``(n−1)·factor + 1`` points, sample k at index ``k·factor``).
+
+    ``linear`` interpolates between samples; ``fft`` is band-limited interpolation assuming the record is one
+    or more whole periods of a periodic signal (exact for multisines).
+    """
+    u = np.ascontiguousarray(u, dtype=np.float64)
+    n = u.size
+    if factor == 1 or n < 2:
+        return u.copy()
+    if method == "linear":
+        return np.interp(np.arange((n - 1) * factor + 1) / factor, np.arange(n), u)
+    if method == "fft":
+        U = np.fft.rfft(u)
+        m = n * factor
+        Uf = np.zeros(m // 2 + 1, dtype=complex)
+        Uf[:U.size] = U
+        if n % 2 == 0:  # split the Nyquist bin so the result stays real and exact
+            Uf[n // 2] *= 0.5
+        uf = np.fft.irfft(Uf, m) * factor
+        return uf[: (n - 1) * factor + 1]
+    raise EffectError(f"dynamics.interp must be 'linear' or 'fft', not {method!r}")
+
+
+# ----------------------------------------------------------------------------------------------- the effect
+class DynamicsEffect(Effect):
+    """Linear second-order dynamics: resonance after the hysteresis (``series``) or a hysteretic restoring force
+    in a mass-spring-damper (``feedback``); the structure is fixed configuration ``dynamics.structure``."""
+
+    name = "dynamics"
+    summary = "stage resonance / inertia: second-order dynamics after or around the hysteresis"
+    physics = ("The stage has mass and a flexure spring: fast inputs excite its resonance, so the output lags, "
+               "overshoots and rings after steps, and the loop tilts and grows with frequency. Either the "
+               "hysteresis drives the resonant stage (series), or the hysteresis is part of the spring force of "
+               "a mass-spring-damper (feedback, as in the Bouc-Wen benchmark).")
+    kind = "wrap"
+
+    def __init__(self, config: Mapping[str, object] | None = None):
+        super().__init__(config)
+        cfg = self._config
+        self.structure = str(cfg.get("dynamics.structure", "series"))
+        if self.structure not in STRUCTURES:
+            raise EffectError(f"dynamics.structure must be one of {', '.join(STRUCTURES)}, not {self.structure!r}")
+        self.substeps = int(float(cfg.get("dynamics.substeps", 20)))
+        if not 1 <= self.substeps <= 1000:
+            raise EffectError("dynamics.substeps must be between 1 and 1000")
+        self.interp = str(cfg.get("dynamics.interp", "linear"))
+        if self.interp not in ("linear", "fft"):
+            raise EffectError(f"dynamics.interp must be 'linear' or 'fft', not {self.interp!r}")
+        # The feedback structure replaces the base model; the instance attribute tells ComposedModel so.
+        self.kind = "base" if self.structure == "feedback" else "wrap"
+        self._ufine_cache: tuple | None = None
+
+    def config(self) -> dict[str, float | str]:
+        return {"structure": self.structure, "substeps": float(self.substeps), "interp": self.interp}
+
+    def params(self) -> tuple[Param, ...]:
+        fs = 1.0 / self.dt
+        nyq = 0.49 * fs
+        if self.structure == "series":
+            return (Param("fn", 0.4 * fs, 0.2, nyq, "Hz", "natural frequency of the stage after the hysteresis"),
+                    Param("zeta", 0.7, 1e-3, 3.0, "", "damping ratio of that resonance"))
+        gref = self.y_scale / self.u_scale
+        yref = 10.0 * self.y_scale
+        return (Param("fn", 0.05 * fs, 0.2, nyq, "Hz", "small-signal natural frequency sqrt((k+α)/m)/2π"),
+                Param("zeta", 0.05, 1e-4, 3.0, "", "damping ratio c/(2 sqrt((k+α) m))"),
+                Param("gain", 0.4 * gref, 1e-4 * gref, 1e3 * gref, "m/unit", "small-signal compliance 1/(k+α)"),
+                Param("share", 0.5, 0.0, 0.999, "", "hysteretic share α/(k+α) of the stiffness"),
+                Param("bg", 0.0, -200.0 / yref, 200.0 / yref, "1/m", "Bouc-Wen β·γ (loop shape)"),
+                Param("bd", 0.0, -200.0 / yref, 200.0 / yref, "1/m", "Bouc-Wen β·δ (loop shape)"))
+
+    def check(self, base, others) -> None:
+        super().check(base, others)
+        if self.structure == "feedback" and any(getattr(o, "kind", "") == "base" for o in others):
+            raise EffectError("dynamics (feedback structure) replaces the base model and cannot be combined with "
+                              "another effect that does the same (e.g. rate)")
+
+    # simulation -----------------------------------------------------------------------------------------
+    def _fine(self, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+        key = (u.size, float(u[0]), float(u[-1]), float(np.sum(u)), float(np.sum(u * u)), self.substeps,
+               self.interp)
+        if self._ufine_cache is None or self._ufine_cache[0] != key:
+            self._ufine_cache = (key, upsample(u, 2 * self.substeps, self.interp))
+        return self._ufine_cache[1]
+
+    def simulate_feedback(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray,
+                          state0: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+        """Displacement of the feedback structure from state ``(y, ẏ, w)`` (default: at rest, zero force)."""
+        t = np.asarray(t, dtype=np.float64)
+        u = np.ascontiguousarray(u, dtype=np.float64)
+        dt = sample_time(t) if t.size > 1 else self.dt
+        p = np.ascontiguousarray(theta, dtype=np.float64)
+        return msd_bw_simulate(p, self._fine(t, u), self.substeps, dt, *map(float, state0))
+
+    def apply(self, theta, t, u, inner):
+        t = np.asarray(t, dtype=np.float64)
+        if self.structure == "series":
+            x = np.asarray(inner(t, u), dtype=np.float64)
+            dt = sample_time(t) if t.size > 1 else self.dt
+            return series_filter(x, float(theta[0]), float(theta[1]), dt)
+        offset = 0.0
+        try:
+            offset = float(inner.model.unpack(inner.theta).get("offset", 0.0))
+        except Exception:  # noqa: BLE001 - a base without named parameters simply has no offset
+            offset = 0.0
+        u = np.asarray(u, dtype=np.float64)
+        if u.size and u[0] != 0.0:
+            # Start at rest under the initial input: the static equilibrium after a slow virgin loading is
+            # approximated by the linear equilibrium y = gain·u0 (w = share·y on the virgin curve with bg=bd=0).
+            y0 = float(theta[2]) * float(u[0])
+            return self.simulate_feedback(theta, t, u, (y0, 0.0, float(theta[3]) * y0)) + offset
+        return self.simulate_feedback(theta, t, u) + offset
+
+    # identification helpers -----------------------------------------------------------------------------
+    def start(self, t, u, y, residual):
+        t = np.asarray(t, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        dt = sample_time(t)
+        fs = 1.0 / dt
+        grid = np.geomspace(max(0.5, 2.0 / (t[-1] - t[0] + dt)), 0.45 * fs, 24)
+        zetas = (0.01, 0.05, 0.2, 0.7)
+        if self.structure == "series":
+            x = y - np.asarray(residual, dtype=np.float64)  # the inner model's output
+            best = (np.inf, None)
+            for fn in grid:
+                for z in zetas:
+                    r = y - series_filter(x, fn, z, dt)
+                    c = float(r @ r)
+                    if np.isfinite(c) and c < best[0]:
+                        best = (c, {"fn": float(fn), "zeta": float(z)})
+            return best[1] or {}
+        # feedback: the linear MSD (bg = bd = 0) with the compliance fitted by least squares, per (fn, ζ).
+        u = np.asarray(u, dtype=np.float64)
+        yc = y - np.mean(y)
+        best = (np.inf, None)
+        for fn in grid[::2]:
+            for z in zetas:
+                s = series_filter(u, fn, z, dt)  # unit-gain response of the linear MSD
+                sc = s - s.mean()
+                den = float(sc @ sc)
+                if den <= 0:
+                    continue
+                g = float(sc @ yc) / den
+                r = yc - g * sc
+                c = float(r @ r)
+                if c < best[0]:
+                    best = (c, {"fn": float(fn), "zeta": float(z), "gain": g, "share": 0.5, "bg": 0.0, "bd": 0.0})
+        return best[1] or {}
+
+    def signature(self, t, u, residual, dt):
+        """Dynamics leaves a residual that follows the input's acceleration, beyond its velocity, or rings after
+        steps. Score: the share of residual variance the acceleration explains on top of the velocity, or the
+        oscillation of the residual after steps."""
+        u = np.asarray(u, dtype=np.float64)
+        r = np.asarray(residual, dtype=np.float64)
+        if u.size < 50:
+            return 0.0, "record too short to test for dynamics"
+        n_s = max(1, int(round(3 * dt / dt)))
+        us = smooth(u, n_s)
+        ud = np.gradient(us, dt)
+        udd = np.gradient(ud, dt)
+        rc = r - r.mean()
+        var = float(rc @ rc)
+        if var <= 0:
+            return 0.0, "no residual left"
+
+        def r2(cols):
+            X = np.column_stack([np.ones_like(rc)] + cols)
+            coef, *_ = np.linalg.lstsq(X, rc, rcond=None)
+            e = rc - X @ coef
+            return 1.0 - float(e @ e) / var
+
+        r2v = r2([ud])
+        r2va = r2([ud, udd])
+        gain = max(r2va - r2v, 0.0)
+        ring_score, ring_txt = 0.0, ""
+        for a, b, step in holds(u, dt, min_seconds=20 * dt, rel_tol=2e-3)[:20]:
+            if step == 0.0 or b - a < 20:
+                continue
+            seg = r[a:b] - np.median(r[a:b])
+            m = min(seg.size, 400)
+            seg = seg[:m]
+            zc = int(np.sum(np.signbit(seg[1:]) != np.signbit(seg[:-1])))
+            amp0 = float(np.max(np.abs(seg[: max(3, m // 4)])))
+            amp1 = float(np.max(np.abs(seg[3 * m // 4:]))) if m >= 8 else amp0
+            if zc >= 4 and amp0 > 3 * amp1 > 0:
+                ring_score = max(ring_score, 0.8)
+                ring_txt = f"; the residual rings and decays after steps ({zc} zero crossings in {m * dt * 1e3:.3g} ms)"
+        score = float(np.clip(max(2.0 * gain, ring_score), 0.0, 1.0))
+        lag = corr(rc[1:], ud[:-1])
+        return score, (f"the residual follows the input's acceleration: it explains {100 * gain:.0f} % of the "
+                       f"residual variance beyond the input velocity (velocity alone {100 * r2v:.0f} %, "
+                       f"corr {lag:+.2f}) → inertia/resonance of the stage{ring_txt}")
+
+
+# ------------------------------------------------------------------------------------- choosing the structure
+@dataclass(frozen=True)
+class StructureChoice:
+    """Outcome of :func:`choose_structure`: the kept structure and each one's validation RMSE (m)."""
+
+    structure: str
+    rmse: dict[str, float]
+    results: dict[str, object]
+
+
+def choose_structure(base, t: np.ndarray, u: np.ndarray, y: np.ndarray, *,
+                     fit: Callable | None = None, config: Mapping[str, object] | None = None,
+                     structures: tuple[str, ...] = STRUCTURES, **fit_options) -> StructureChoice:
+    """Fit base + dynamics in each structure and keep the one with the lower validation RMSE.
+
+    Parameters
+    ----------
+    base : Model
+        Base hysteresis model (its config supplies ``u_scale``, ``y_scale``).
+    t, u, y : ndarray
+        Record (s, input unit, m).
+    fit : callable, optional
+        ``fit(model, t, u, y, **fit_options) -> FitResult`` with a ``rmse`` (validation) attribute; default
+        :func:`hyst_model.identify.fit`.
+    config : mapping, optional
+        Extra configuration (``dt``, ``dynamics.substeps``, ``dynamics.interp``).
+    """
+    from .compose import compose
+    if fit is None:
+        from ..identify import fit as fit  # noqa: PLW0127
+    results: dict[str, object] = {}
+    rmse: dict[str, float] = {}
+    for s in structures:
+        cfg = dict(config or {})
+        cfg["dynamics.structure"] = s
+        cfg.setdefault("dt", sample_time(np.asarray(t, float)))
+        model = compose(base, [DynamicsEffect({**base.config(), **cfg})])
+        res = fit(model, t, u, y, **fit_options)
+        results[s] = res
+        v = getattr(res, "rmse", None)
+        if v is None or not np.isfinite(v):
+            v = getattr(res, "rmse_train", np.inf)
+        rmse[s] = float(v)
+    best = min(rmse, key=rmse.get)
+    return StructureChoice(best, rmse, results)

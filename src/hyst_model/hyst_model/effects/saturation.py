@@ -1,0 +1,95 @@
+"""Saturation: a smooth limit of the stroke at its end(s) (output side).
+
+Preloaded stacks and flexure stages stiffen near the end of their travel, and amplifiers and sensors compress
+near the end of their range, so large displacements fall short of what the hysteresis model predicts — more
+the further out. The effect is the identity inside a knee and a tanh soft limit beyond it (C¹ at the knee):
+
+    y = k_hi + w · tanh((x − k_hi) / w)   for x > k_hi = top − w        (x = y_inner)
+    y = k_lo − w · tanh((k_lo − x) / w)   for x < k_lo = bottom + w      (two-sided only)
+
+``top`` and ``bottom`` (m) are the asymptotic limits, ``w`` (m) the knee width. A unipolar stage (PEA, input
+never negative) saturates at the top only; a bipolar one (GMA) at both ends: ``saturation.two_sided`` is chosen
+from the data's input sign in :meth:`Saturation.start` and stored in the params file.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Param
+from .base import Effect
+from .signals import corr
+
+__all__ = ["Saturation", "soft_limit"]
+
+
+def soft_limit(x: np.ndarray, top: float, bottom: float, w: float, two_sided: bool) -> np.ndarray:
+    """The saturation map (see module docstring)."""
+    x = np.asarray(x, dtype=np.float64)
+    y = x.copy()
+    k = top - w
+    m = x > k
+    y[m] = k + w * np.tanh((x[m] - k) / w)
+    if two_sided:
+        k = bottom + w
+        m = x < k
+        y[m] = k - w * np.tanh((k - x[m]) / w)
+    return y
+
+
+class Saturation(Effect):
+    """Smooth stroke limit with a linear core and tanh knees."""
+
+    name = "saturation"
+    summary = "smooth saturation: the stroke falls short at the end(s) of the travel"
+    physics = ("Near the end of the travel the measured displacement falls short of the model, more the larger "
+               "the excursion: a flexure/preload stiffening, or an amplifier or sensor range limit.")
+    kind = "output"
+
+    def __init__(self, config=None):
+        super().__init__(config)
+        self.two_sided = bool(float(self._config.get("saturation.two_sided", 0.0)))
+        self.bound = float(self._config.get("offset_bound", 1e-3)) + 50.0 * self.y_scale
+
+    def params(self):
+        b = self.bound
+        return (Param("top", b, -b, b, "m", "upper displacement limit (asymptote)"),
+                Param("bottom", -b, -b, b, "m", "lower displacement limit (two-sided only)"),
+                Param("width", self.y_scale, 1e-3 * self.y_scale, 20.0 * self.y_scale, "m", "knee width"))
+
+    def config(self):
+        return {"two_sided": float(self.two_sided)}
+
+    def output(self, theta, t, u, y):
+        top, bottom, w = float(theta[0]), float(theta[1]), float(theta[2])
+        return soft_limit(y, top, bottom, w, self.two_sided)
+
+    def start(self, t, u, y, residual):
+        self.two_sided = bool(np.min(u) < -0.05 * np.max(np.abs(u)))
+        x = np.asarray(y, float) - residual  # ≈ base model output
+        lo, hi = float(np.min(x)), float(np.max(x))
+        span = hi - lo
+        best = (float(residual @ residual), {})
+        for frac in (0.05, 0.1, 0.2, 0.3, 0.5):
+            for wf in (0.05, 0.1, 0.2, 0.4):
+                w = wf * span
+                top, bottom = hi - frac * span + w, lo + frac * span - w
+                d = soft_limit(x, top, bottom, w, self.two_sided) - x
+                den = float(d @ d)
+                if den <= 0:
+                    continue
+                g = float(d @ residual) / den  # how much of this deficit the residual shows
+                cost = float(((residual - d) ** 2).sum())
+                if 0.5 < g < 2.0 and cost < best[0]:
+                    best = (cost, {"top": top, "bottom": bottom, "width": w})
+        return best[1]
+
+    def signature(self, t, u, residual, dt):
+        uc = 0.5 * (float(np.min(u)) + float(np.max(u)))
+        x = np.asarray(u, float) - uc
+        xn = x / max(float(np.max(np.abs(x))), 1e-300)
+        top = np.clip(xn - 0.5, 0.0, None) ** 2
+        bot = np.clip(-xn - 0.5, 0.0, None) ** 2
+        c = max(corr(residual, -top), corr(residual, -top + bot))
+        score = float(np.clip(c, 0.0, 1.0))
+        return score, (f"near the end of the stroke the measurement falls short of the model, more the further "
+                       f"out (corr {c:+.2f} with a shortfall growing beyond the knee) → the travel saturates")

@@ -1,0 +1,135 @@
+"""What every estimator shares: data checks, the split, the training cost (3.26) and the final scoring."""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from ..errors import FitError
+from ..model import Model
+from .result import FitResult, Split, make_split, rmse
+
+__all__ = ["Estimator", "TrainProblem", "model_label"]
+
+
+def model_label(model: Model) -> str:
+    """``mbw`` or ``mbw+creep+delay`` for composed models."""
+    base = getattr(model, "base", None)
+    effects = getattr(model, "effects", None)
+    if base is not None and effects:
+        return "+".join([str(base.name)] + [str(getattr(e, "name", e)) for e in effects])
+    return str(model.name)
+
+
+class TrainProblem:
+    """The training cost of one model on one record: free-run simulation from rest up to the end of training.
+
+    ``residuals(theta)`` returns normalised residuals (divided by ``scale``) on the training window; non-finite
+    simulations (a diverging parameter set) give a large finite penalty so optimisers can step back.
+    """
+
+    def __init__(self, model: Model, t: np.ndarray, u: np.ndarray, y: np.ndarray, split: Split):
+        self.model = model
+        self.t = t[:split.train_stop]
+        self.u = u[:split.train_stop]
+        self.y = y[split.train_start:split.train_stop]
+        self.y_full = y[:split.train_stop]  # for starts that look at the data before the scored window
+        self.a = split.train_start
+        self.scale = float(np.std(self.y)) or 1.0
+        self.n_eval = 0
+        lo, hi = model.bounds
+        self.lower, self.upper = lo.astype(np.float64), hi.astype(np.float64)
+        self.has_jac = hasattr(model, "simulate_jac")
+
+    def simulate(self, theta: np.ndarray) -> np.ndarray:
+        self.n_eval += 1
+        with np.errstate(all="ignore"):
+            return np.asarray(self.model.simulate(np.asarray(theta, dtype=np.float64), self.t, self.u))[self.a:]
+
+    def residuals(self, theta: np.ndarray) -> np.ndarray:
+        r = (self.simulate(theta) - self.y) / self.scale
+        if not np.all(np.isfinite(r)):
+            return np.full(self.y.size, 1e3)
+        return r
+
+    def jac(self, theta: np.ndarray) -> np.ndarray:
+        self.n_eval += 1
+        with np.errstate(all="ignore"):
+            _, J = self.model.simulate_jac(np.asarray(theta, dtype=np.float64), self.t, self.u)
+        J = J[self.a:] / self.scale
+        if not np.all(np.isfinite(J)):
+            J = np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
+        return J
+
+    def cost(self, theta: np.ndarray) -> float:
+        """Training RMSE (m), inf for a diverging parameter set."""
+        r = self.simulate(theta) - self.y
+        return rmse(r) if np.all(np.isfinite(r)) else float("inf")
+
+    def clip(self, theta: np.ndarray, margin: float = 1e-9) -> np.ndarray:
+        """Strictly inside the bounds (trust-region solvers need an interior start)."""
+        span = self.upper - self.lower
+        return np.clip(theta, self.lower + margin * span, self.upper - margin * span)
+
+
+class Estimator:
+    """Base class: ``fit(t, u, y)`` returns self with ``theta_``, ``params_``, ``result_``.
+
+    Parameters
+    ----------
+    model : Model
+        Any model implementing :class:`hyst_model.model.Model` (composed models included).
+    split : float or (t0, t1) or None
+        Train/validation split, see :mod:`hyst_model.identify.result`.
+    progress : callable or bool, optional
+        ``progress(message: str)`` receives status lines; True prints them to stderr.
+    """
+
+    method = "base"
+
+    def __init__(self, model: Model, *, split=0.25, progress: Callable[[str], None] | bool | None = None):
+        self.model = model
+        self.split = split
+        if progress is True:
+            import sys
+            self.progress = lambda msg: print(msg, file=sys.stderr, flush=True)
+        else:
+            self.progress = progress or None
+
+    def _say(self, msg: str) -> None:
+        if self.progress:
+            self.progress(msg)
+
+    def _solve(self, problem: TrainProblem) -> tuple[np.ndarray, int, list, str]:
+        """Return ``(theta, n_iterations, history, message)``; implemented by subclasses."""
+        raise NotImplementedError
+
+    def fit(self, t, u, y) -> "Estimator":
+        t = np.ascontiguousarray(t, dtype=np.float64)
+        u = np.ascontiguousarray(u, dtype=np.float64)
+        y = np.ascontiguousarray(y, dtype=np.float64)
+        if not (t.size == u.size == y.size):
+            raise FitError("t, u, y must have the same length")
+        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(y)) and np.all(np.isfinite(t))):
+            raise FitError("data contain NaN/inf; check the record first")
+        split = make_split(t, self.split)
+        t0 = time.perf_counter()
+        problem = TrainProblem(self.model, t, u, y, split)
+        theta, n_iter, history, message = self._solve(problem)
+        seconds = time.perf_counter() - t0
+        with np.errstate(all="ignore"):
+            yhat = np.asarray(self.model.simulate(theta, t, u))
+        res = y - yhat
+        r_tr = rmse(res[split.train_start:split.train_stop])
+        r_val = rmse(res[split.val_start:split.val_stop]) if split.has_validation else r_tr
+        if not np.isfinite(r_tr):
+            raise FitError(f"{self.method} fit diverged (no finite parameter set found)")
+        self.theta_ = np.asarray(theta, dtype=np.float64)
+        self.params_ = self.model.unpack(self.theta_)
+        self.split_ = split
+        self.result_ = FitResult(model=model_label(self.model), method=self.method, params=dict(self.params_),
+                                 theta=self.theta_, rmse_train=r_tr, rmse=r_val, seconds=seconds,
+                                 n_evaluations=problem.n_eval, n_iterations=int(n_iter), residuals=res,
+                                 split=split.description, cost=r_tr, history=list(history), message=message)
+        return self

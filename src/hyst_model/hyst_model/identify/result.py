@@ -1,0 +1,130 @@
+"""Fit results and the train/validation split shared by every estimator.
+
+The split
+---------
+Every estimator simulates the model in free run (simulation mode, as the thesis's RMSE (3.26) and the Bouc-Wen
+benchmark define it) **from rest at the start of the record**, and scores two windows of that one simulation:
+
+* ``split = f`` (float, default 0.25): the last ``f`` of the samples are the validation window, the rest train.
+* ``split = (t0, t1)`` (seconds): train on ``t0 <= t < t1``, validate on ``t >= t1`` (e.g. "the first three
+  cycles"). Samples before ``t0`` are simulated but not scored, so the model state carries through them.
+* ``split = 0`` or ``None``: no hold-out; ``rmse`` is then the training RMSE and ``split_`` says so.
+
+Training only simulates up to the end of the training window, so held-out samples never influence the fit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import FitError
+
+__all__ = ["Split", "make_split", "FitResult", "rmse"]
+
+
+def rmse(a: np.ndarray) -> float:
+    """Root mean square (3.26); NaN for an empty array."""
+    a = np.asarray(a, dtype=np.float64)
+    return float(np.sqrt(np.mean(a * a))) if a.size else float("nan")
+
+
+@dataclass(frozen=True)
+class Split:
+    """Index windows of one record: train ``[train_start, train_stop)``, validation ``[val_start, val_stop)``."""
+
+    train_start: int
+    train_stop: int
+    val_start: int
+    val_stop: int
+    description: str
+
+    @property
+    def has_validation(self) -> bool:
+        return self.val_stop > self.val_start
+
+
+def make_split(t: np.ndarray, split) -> Split:
+    """Turn a ``split`` specification (see module docstring) into index windows for sample times ``t``."""
+    n = int(np.asarray(t).size)
+    if split is None or (isinstance(split, (int, float)) and float(split) == 0.0):
+        return Split(0, n, n, n, "no hold-out: validation RMSE equals training RMSE")
+    if isinstance(split, (int, float)):
+        f = float(split)
+        if not 0.0 < f < 1.0:
+            raise FitError(f"validation fraction must be in (0, 1), got {f}")
+        k = int(round(n * (1.0 - f)))
+        if k < 20 or n - k < 1:
+            raise FitError(f"record too short ({n} samples) for a {f:.0%} hold-out")
+        return Split(0, k, k, n, f"train on the first {1 - f:.0%} of the record ({k} samples), validate on the "
+                                 f"last {f:.0%} ({n - k} samples), free-run from rest at the record start")
+    try:
+        t0, t1 = (float(x) for x in split)
+    except (TypeError, ValueError):
+        raise FitError(f"split must be a fraction or (t0, t1) in seconds, got {split!r}") from None
+    t = np.asarray(t, dtype=np.float64)
+    a = int(np.searchsorted(t, t0, side="left"))
+    b = int(np.searchsorted(t, t1, side="left"))
+    if b - a < 20:
+        raise FitError(f"training window {t0:g}–{t1:g} s holds only {max(b - a, 0)} samples "
+                       f"(record spans {t[0]:g}–{t[-1]:g} s)")
+    desc = (f"train on {t0:g} <= t < {t1:g} s ({b - a} samples), validate on t >= {t1:g} s ({n - b} samples), "
+            "free-run from rest at the record start")
+    return Split(a, b, b, n, desc)
+
+
+@dataclass
+class FitResult:
+    """Outcome of one identification.
+
+    Attributes
+    ----------
+    model : str
+        Model name (base + effects, e.g. ``mbw`` or ``mbw+creep``).
+    method : str
+        ``fast``, ``epso`` or ``lsq``.
+    params : dict
+        Fitted parameter values by name (SI units where they have one).
+    theta : ndarray
+        Packed parameters in the model's order.
+    rmse_train : float
+        RMSE (m) on the training window (3.26).
+    rmse : float
+        RMSE (m) on the validation window (the number to trust); equals ``rmse_train`` without a hold-out.
+    seconds : float
+        Wall time of the fit (s).
+    n_evaluations : int
+        Model simulations used (Jacobian evaluations count as one each).
+    n_iterations : int
+        Optimiser iterations (swarm generations, least-squares iterations).
+    residuals : ndarray
+        Measured minus simulated output (m) over the whole record (free run from rest).
+    split : str
+        How train/validation were chosen.
+    cost : float
+        Final training cost (RMSE, m).
+    history : list of float
+        Best training RMSE per iteration (EPSO) or per start (fast).
+    """
+
+    model: str
+    method: str
+    params: dict
+    theta: np.ndarray
+    rmse_train: float
+    rmse: float
+    seconds: float
+    n_evaluations: int
+    n_iterations: int
+    residuals: np.ndarray
+    split: str
+    cost: float = float("nan")
+    history: list = field(default_factory=list)
+    message: str = ""
+
+    def to_dict(self) -> dict:
+        """JSON-friendly summary (no residual array)."""
+        return {"model": self.model, "method": self.method, "rmse": self.rmse, "rmse_train": self.rmse_train,
+                "seconds": self.seconds, "n_evaluations": int(self.n_evaluations),
+                "n_iterations": int(self.n_iterations), "split": self.split, "params": dict(self.params),
+                "message": self.message}

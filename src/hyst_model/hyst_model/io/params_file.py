@@ -1,0 +1,232 @@
+"""The params file: a ROS 2 parameters YAML that describes one fitted model (docs/ARCHITECTURE.md).
+
+::
+
+    /**:
+      ros__parameters:
+        model:
+          base: mbw
+          effects: []
+          zeta1: 0.4029        # every Param.name; effect params nested: creep.gain -> creep: {gain: ...}
+          ...
+          offset: 0.0          # m
+          u_scale: 15.0        # config (not fitted)
+          y_scale: 5.42e-06
+          dt: 0.0005
+        fit: {method: fast, rmse: 1.2e-08, rmse_train: 1.1e-08, data: bags/x}
+
+The controller node loads it with ``--ros-args --params-file P``; ``hyst simulate``, the sim and the
+identification node read it with :func:`read_params`. Writes are atomic (temporary file + rename in the same
+directory) and never replace an existing file unless ``force=True``; without ``force`` the final link is
+``os.link``, which fails if the target appeared meanwhile, so even a race cannot clobber a file.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..errors import HystError, ParamsError
+from ..model import Model
+
+__all__ = ["ParamsSpec", "read_params", "write_params", "spec_from_model", "to_yaml", "flatten", "nest"]
+
+
+def flatten(d: Mapping, prefix: str = "") -> dict:
+    """``{"creep": {"gain": 1}}`` → ``{"creep.gain": 1}``."""
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def nest(d: Mapping) -> dict:
+    """Inverse of :func:`flatten`."""
+    out: dict = {}
+    for k, v in d.items():
+        parts = str(k).split(".")
+        cur = out
+        for p in parts[:-1]:
+            cur = cur.setdefault(p, {})
+        cur[parts[-1]] = v
+    return out
+
+
+@dataclass
+class ParamsSpec:
+    """A model spec as stored in a params file.
+
+    Attributes
+    ----------
+    base : str
+        Key in :data:`hyst_model.models.BASE_MODELS`.
+    effects : list of str
+        Keys in ``hyst_model.effects.EFFECTS``, in order.
+    values : dict
+        Fitted value per ``Param.name`` (dotted for effect parameters), SI units.
+    config : dict
+        Non-fitted configuration (``u_scale``, ``y_scale``, ``dt``, ...).
+    fit : dict
+        Provenance (method, rmse, rmse_train, data, ...); informative only.
+    """
+
+    base: str
+    effects: list = field(default_factory=list)
+    values: dict = field(default_factory=dict)
+    config: dict = field(default_factory=dict)
+    fit: dict = field(default_factory=dict)
+
+    def model(self) -> Model:
+        """Rebuild the model (:func:`hyst_model.spec.build_model`)."""
+        from ..spec import build_model
+        return build_model(self.base, self.effects, self.config)
+
+    def theta(self, model: Model | None = None) -> np.ndarray:
+        """Packed parameter vector for ``model`` (default :meth:`model`); every parameter must be present."""
+        model = model or self.model()
+        missing = [n for n in model.names if n not in self.values]
+        if missing:
+            raise ParamsError(f"params file lacks model parameter(s) {', '.join(missing)}")
+        return model.pack(self.values)
+
+    def parameters(self) -> dict:
+        """Flat ROS parameter names → values (``model.zeta1``, ``model.creep.gain``, ...), as a node declares."""
+        out = {"model.base": self.base, "model.effects": list(self.effects)}
+        out.update({f"model.{k}": v for k, v in {**self.config, **self.values}.items()})
+        return out
+
+
+def spec_from_model(model: Model, theta, *, fit: Mapping | None = None, dt: float | None = None) -> ParamsSpec:
+    """A :class:`ParamsSpec` for ``model`` at packed ``theta``."""
+    base = getattr(model, "base", model)
+    effects = [getattr(e, "name", str(e)) for e in getattr(model, "effects", [])]
+    config = dict(model.config())
+    if dt is not None:
+        config["dt"] = float(dt)
+    values = {k: float(v) for k, v in model.unpack(np.asarray(theta, dtype=np.float64)).items()}
+    return ParamsSpec(str(base.name), effects, values, config, dict(fit or {}))
+
+
+def _plain(v):
+    if isinstance(v, (np.floating, float)):
+        return float(v)
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    return v
+
+
+def to_yaml(spec: ParamsSpec, node: str = "/**") -> str:
+    """The YAML text of a params file. Numbers in ``values``/``config`` are written as floats (ROS types them)."""
+    model: dict = {"base": spec.base, "effects": list(spec.effects)}
+    model.update(nest({k: (float(v) if isinstance(v, (int, float, np.number)) and not isinstance(v, bool) else
+                           _plain(v)) for k, v in {**spec.config, **spec.values}.items()}))
+    doc = {node: {"ros__parameters": {"model": model}}}
+    if spec.fit:
+        doc[node]["ros__parameters"]["fit"] = {k: _plain(v) for k, v in spec.fit.items()}
+    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=False)
+
+
+def write_params(path: str | Path, spec: ParamsSpec, *, force: bool = False, node: str = "/**") -> Path:
+    """Write ``spec`` to ``path`` atomically.
+
+    Raises
+    ------
+    ParamsError
+        ``path`` exists and ``force`` is false, or its directory does not exist.
+    """
+    path = Path(path)
+    if path.exists() and not force:
+        raise ParamsError(f"{path} exists; use --force to overwrite it")
+    if path.is_dir():
+        raise ParamsError(f"{path} is a directory")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise ParamsError(f"{parent}: no such directory")
+    text = to_yaml(spec, node)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        if force:
+            os.replace(tmp, path)
+        else:
+            try:
+                os.link(tmp, path)  # atomic and fails if the target exists: no clobbering even in a race
+            except FileExistsError:
+                raise ParamsError(f"{path} exists; use --force to overwrite it") from None
+            os.unlink(tmp)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def read_params(path: str | Path) -> ParamsSpec:
+    """Read a params file written by :func:`write_params` (or by hand in the same layout).
+
+    The first top-level node entry with ``ros__parameters.model`` is used. Keys of ``model`` that are parameters
+    of the rebuilt model become ``values``; the rest (``u_scale``, ``y_scale``, ``dt``, ...) become ``config``.
+
+    Raises
+    ------
+    ParamsError
+        Missing or unreadable file, no ``model`` section, unknown base model or effect, missing parameters.
+    """
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ParamsError(f"{path}: no such params file") from None
+    except (OSError, yaml.YAMLError) as err:
+        raise ParamsError(f"{path}: cannot read params file ({err})") from err
+    if not isinstance(doc, Mapping):
+        raise ParamsError(f"{path}: not a ROS 2 parameters file (expected '/**: ros__parameters: model: ...')")
+    section = None
+    for node, body in doc.items():
+        if isinstance(body, Mapping) and isinstance(body.get("ros__parameters"), Mapping) \
+                and isinstance(body["ros__parameters"].get("model"), Mapping):
+            section = body["ros__parameters"]
+            break
+    if section is None:
+        raise ParamsError(f"{path}: no 'ros__parameters: model:' section")
+    model = dict(section["model"])
+    base = model.pop("base", None)
+    if not isinstance(base, str):
+        raise ParamsError(f"{path}: model.base missing (e.g. 'mbw')")
+    effects = model.pop("effects", []) or []
+    if isinstance(effects, str):
+        effects = [e.strip() for e in effects.split(",") if e.strip()]
+    flat = flatten(model)
+    for k, v in flat.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float, str)):
+            raise ParamsError(f"{path}: model.{k} has an unsupported value {v!r}")
+    spec = ParamsSpec(base, list(effects), {}, {}, dict(section.get("fit") or {}))
+    numeric = {k: v for k, v in flat.items() if isinstance(v, (int, float))}
+    spec.config = {k: v for k, v in flat.items()}
+    try:
+        m = spec.model()
+    except HystError:
+        raise
+    except (ValueError, TypeError) as err:
+        raise ParamsError(f"{path}: invalid model configuration ({err})") from err
+    names = set(m.names)
+    spec.values = {k: float(v) for k, v in numeric.items() if k in names}
+    spec.config = {k: v for k, v in flat.items() if k not in names}
+    bad = [k for k, v in spec.values.items() if not np.isfinite(v)]
+    if bad:
+        raise ParamsError(f"{path}: non-finite value for {', '.join(bad)}")
+    spec.theta(m)  # every parameter present
+    return spec

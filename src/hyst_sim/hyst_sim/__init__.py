@@ -1,0 +1,11 @@
+"""hyst_sim: the simulated stage that stands in for the driver, and the bag recorder/player.
+
+Layers: :mod:`hyst_sim.plant` and :mod:`hyst_sim.truth_effects` (numerical core, numpy/numba only),
+:mod:`hyst_sim.profiles` (amplifier/stage limits shared with the driver), :mod:`hyst_sim.scenario` and
+:mod:`hyst_sim.bagio` (file IO), ``*_node.py`` (thin rclpy nodes; the only modules importing rclpy).
+"""
+from .errors import BagError, ConfigError, ScenarioError, SimError
+from .profiles import GMA, PEA, PROFILES, Profile, clip_command, get_profile
+
+__all__ = ["BagError", "ConfigError", "ScenarioError", "SimError",
+           "GMA", "PEA", "PROFILES", "Profile", "clip_command", "get_profile"]

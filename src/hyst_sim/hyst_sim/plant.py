@@ -1,0 +1,479 @@
+"""The simulated stage: amplifier limits, MBW hysteresis (thesis eq. 3.21) and optional physical effects.
+
+Pure numerics (numpy/numba; scipy only to discretise a resonance). The sim node, ``hyst track``, the driver's
+emulator and the diagnosis tests all build on this API::
+
+    from hyst_sim.plant import Plant, PlantConfig
+
+    plant = Plant.default(rate=1000.0, seed=0)   # pea_default() + 2 nm noise + 2 nm quantisation, dt = 1/rate
+    plant.reset()                                 # rest at config.v_init (0 V); re-seeds the noise
+    r = plant.step(75.0)                          # StepResult(y=<m>, u_applied=75.0, clipped=False)
+    out = plant.run(u_array)                      # RunResult arrays, identical to repeated step()
+
+    cfg = PlantConfig.for_profile("gma", rate=2000.0)            # profile limits, default stage, sensor
+    cfg = PlantConfig.from_scenario("hidden_creep.yaml")          # default + hidden effects (never printed)
+    cfg = cfg.with_strengths(delay=2, noise=0.0)                  # frozen: every change is a new config
+    plant.reconfigure(cfg)                                        # swap config, keep the stage's state
+
+Signal chain per sample ``k`` (see :mod:`hyst_sim.truth_effects` for each effect)::
+
+    u_cmd ─ clip to [v_min, v_max] and slew_max·dt (NaN/inf hold the last value) ─▶ u_applied
+    u_applied ─ delay ─▶ MBW(u/u_scale) · y_scale + offset ─ asymmetry ─ creep ─ saturation ─ dynamics ─▶ x
+    x ─ + drift ─ + noise ─ quantisation ─▶ y (what the sensor reports)
+
+With every effect off, ``y`` equals :meth:`hyst_model.core.MBWParams.simulate` of the applied voltage exactly
+(the plant calls :func:`hyst_model.core.mbw_step`; there is no second MBW implementation). The MBW parameters
+are per plant sample; ``mbw_substeps`` > 1 runs the recursion that many times per sample with the input held
+(a model identified at ``dt/mbw_substeps``, e.g. a 2 kHz fit driven by a 1 kHz sim).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from hyst_model.core import MBWParams, mbw_rest_state, mbw_step
+
+from .errors import ConfigError, SimError
+from .profiles import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, clip_kernel, get_profile
+from .truth_effects import Effects, asymmetry_kernel, creep_kernel, dynamics_kernel, saturation_kernel
+
+__all__ = ["PlantConfig", "Plant", "StepResult", "RunResult", "CLIP_RANGE", "CLIP_SLEW", "CLIP_NONFINITE"]
+
+_NORMAL_BLOCK = 4096  # rows of pre-drawn N(0,1) pairs; the stream is the same however it is consumed
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """Everything that defines a simulated stage; frozen, so a change is a new object.
+
+    Attributes
+    ----------
+    mbw : MBWParams
+        Hysteresis model with its SI scaling (V in, m out).
+    dt : float
+        Sample period (s), ``1/rate``.
+    v_min, v_max : float
+        Amplifier range (V); commands are clipped into it.
+    slew_max : float
+        Amplifier slew limit (V/s); ``inf`` disables it.
+    v_init : float
+        Voltage the stage rests at after :meth:`Plant.reset` (V).
+    stroke : tuple of float or None
+        ``(x_lo, x_hi)`` nominal displacement at ``v_min``/``v_max`` held (m), the scale of asymmetry and
+        saturation; None = computed from the MBW rest states.
+    mbw_substeps : int
+        MBW recursions per sample (input held), see the module docstring.
+    effects : Effects
+        Physical effects; all off by default.
+    seed : int
+        Seed of the noise/drift random stream (:meth:`Plant.reset` restarts it).
+    """
+
+    mbw: MBWParams
+    dt: float = 1e-3
+    v_min: float = 0.0
+    v_max: float = 150.0
+    slew_max: float = math.inf
+    v_init: float = 0.0
+    stroke: tuple[float, float] | None = None
+    mbw_substeps: int = 1
+    effects: Effects = field(default_factory=Effects)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise :class:`ConfigError` with a reason for any inconsistent setting."""
+        if not (math.isfinite(self.dt) and 1e-6 <= self.dt <= 1.0):
+            raise ConfigError(f"dt must be in [1 us, 1 s], got {self.dt!r}")
+        if not (math.isfinite(self.v_min) and math.isfinite(self.v_max) and self.v_min < self.v_max):
+            raise ConfigError(f"need finite v_min < v_max, got [{self.v_min}, {self.v_max}] V")
+        if not self.v_min <= self.v_init <= self.v_max:
+            raise ConfigError(f"v_init = {self.v_init} V is outside [{self.v_min}, {self.v_max}] V")
+        if not self.slew_max > 0:
+            raise ConfigError(f"slew_max must be positive (inf = no limit), got {self.slew_max!r}")
+        if not (isinstance(self.mbw_substeps, int) and 1 <= self.mbw_substeps <= 64):
+            raise ConfigError(f"mbw_substeps must be an integer in [1, 64], got {self.mbw_substeps!r}")
+        m = self.mbw
+        if not (np.all(np.isfinite(m.vector)) and m.u_scale > 0 and m.y_scale > 0 and math.isfinite(m.offset)):
+            raise ConfigError("MBW parameters must be finite with positive u_scale and y_scale")
+        if self.stroke is not None and not (len(self.stroke) == 2 and self.stroke[0] < self.stroke[1]):
+            raise ConfigError("stroke must be (x_lo, x_hi) with x_lo < x_hi (m)")
+        if not isinstance(self.effects, Effects):
+            raise ConfigError("effects must be an Effects instance")
+        self.effects.validate()
+
+    @property
+    def rate(self) -> float:
+        """Sample rate (Hz)."""
+        return 1.0 / self.dt
+
+    # Constructors ---------------------------------------------------------------------------------------------
+    @classmethod
+    def for_profile(cls, profile: str = "pea", rate: float = 1000.0, *, mbw: MBWParams | None = None,
+                    sensor: bool = True, seed: int = 0, **overrides) -> "PlantConfig":
+        """A stage with the profile's amplifier range, slew limit and default model.
+
+        Parameters
+        ----------
+        profile : {"pea", "gma"}
+        rate : float
+            Sample rate (Hz).
+        mbw : MBWParams, optional
+            Stage model; default the profile's (``pea_default()`` for the PEA).
+        sensor : bool
+            Switch on the profile's sensor noise and quantisation (2 nm each for both profiles).
+        **overrides
+            Any other :class:`PlantConfig` field.
+        """
+        prof = get_profile(profile)
+        if not (math.isfinite(rate) and rate > 0):
+            raise ConfigError(f"rate must be a positive number of Hz, got {rate!r}")
+        effects = overrides.pop("effects", Effects())
+        if sensor:
+            effects = effects.with_strengths(noise=prof.sensor_noise, quantization=prof.sensor_resolution)
+        kw = dict(mbw=mbw if mbw is not None else prof.model(), dt=1.0 / rate, v_min=prof.v_min,
+                  v_max=prof.v_max, slew_max=prof.slew_max, v_init=prof.v_safe, effects=effects, seed=seed)
+        kw.update(overrides)
+        return cls(**kw)
+
+    @classmethod
+    def from_scenario(cls, path: str | Path, base: "PlantConfig | None" = None) -> "PlantConfig":
+        """``base`` (default :meth:`for_profile` ``("pea")``) with a scenario file's hidden effects applied.
+
+        The effects a scenario names replace the base's; the file's contents are never printed (errors name the
+        file and the structural problem only). See :mod:`hyst_sim.scenario`.
+        """
+        from .scenario import load_scenario  # late: file IO is not part of the numerical core
+
+        return load_scenario(path).apply(base if base is not None else cls.for_profile("pea"))
+
+    @classmethod
+    def from_params_file(cls, path: str | Path, profile: str = "pea", rate: float = 1000.0,
+                         **overrides) -> "PlantConfig":
+        """A profile's stage with the MBW model of a params file (``docs/ARCHITECTURE.md``).
+
+        The file's ``dt`` (if given) sets ``mbw_substeps = round(1/(rate·dt))``; a rate faster than the model's
+        sample time, or not an integer multiple of it, is refused with a reason.
+        """
+        from .scenario import load_params_file  # late: file IO is not part of the numerical core
+
+        pf = load_params_file(path)
+        if pf.dt is not None and "mbw_substeps" not in overrides:
+            overrides["mbw_substeps"] = substeps_for(1.0 / rate, pf.dt)
+        return cls.for_profile(profile, rate, mbw=pf.mbw, **overrides)
+
+    def with_strengths(self, **strengths: float) -> "PlantConfig":
+        """Copy with new effect strengths (``creep=0.01``, ``delay=3``, ``noise=0``...)."""
+        return replace(self, effects=self.effects.with_strengths(**strengths))
+
+    def replace(self, **kw) -> "PlantConfig":
+        """Copy with fields replaced (validated)."""
+        return replace(self, **kw)
+
+
+def substeps_for(dt: float, model_dt: float) -> int:
+    """MBW recursions per plant sample for a model identified at ``model_dt`` (s); refuses non-integer ratios."""
+    ratio = dt / model_dt
+    n = int(round(ratio))
+    if n < 1 or abs(ratio - n) > 1e-6 * max(1.0, ratio):
+        raise ConfigError(f"the model was identified at dt = {model_dt:g} s; the plant period {dt:g} s must be an "
+                          f"integer multiple of it (rate <= {1.0 / model_dt:g} Hz, e.g. {1.0 / model_dt:g} or "
+                          f"{0.5 / model_dt:g} Hz)")
+    return n
+
+
+class StepResult(NamedTuple):
+    """One sample: sensor reading ``y`` (m), voltage ``u_applied`` (V), ``clipped`` (range/slew/non-finite)."""
+
+    y: float
+    u_applied: float
+    clipped: bool
+
+
+class RunResult(NamedTuple):
+    """A record: sensor reading ``y`` (m), applied voltage ``u_applied`` (V), ``flags`` (bits
+    :data:`CLIP_RANGE` | :data:`CLIP_SLEW` | :data:`CLIP_NONFINITE`) and the true stage position ``x`` (m,
+    before drift, noise and quantisation; for evaluation only, never published)."""
+
+    y: np.ndarray
+    u_applied: np.ndarray
+    flags: np.ndarray
+    x: np.ndarray
+
+    @property
+    def clipped(self) -> np.ndarray:
+        return self.flags != 0
+
+
+# Indices into the packed float settings (_F) and state (_S) arrays of the compiled loop.
+(F_US, F_YS, F_OFF, F_VMIN, F_VMAX, F_STEP, F_SUB, F_ASYM, F_XMID, F_HALF, F_CREEP, F_SAT, F_SATLO, F_SATHI,
+ F_SATW, F_DYN, F_DR, F_DA, F_DW, F_DQ, F_NOISE, F_QUANT, F_DT, F_DELAY) = range(24)
+(S_Y, S_UM, S_UA, S_T, S_DRIFT, S_DT_T, S_DIDX, S_XQ, S_X) = range(9)
+
+
+@njit(cache=True)
+def _plant_loop(u_cmd, p, f, st, creep_a, creep_c, phi, gam, dz, dbuf, normals, out_y, out_u, out_f, out_x):
+    """Advance the plant over ``u_cmd`` (V); states are updated in place (see the module signal chain)."""
+    n_delay = int(f[F_DELAY])
+    n_sub = int(f[F_SUB])
+    for k in range(u_cmd.shape[0]):
+        ua, flags = clip_kernel(u_cmd[k], f[F_VMIN], f[F_VMAX], st[S_UA], f[F_STEP])
+        st[S_UA] = ua
+        ue = ua
+        if n_delay > 0:
+            i = int(st[S_DIDX])
+            ue = dbuf[i]
+            dbuf[i] = ua
+            st[S_DIDX] = (i + 1) % n_delay
+        um = ue / f[F_US]
+        y = st[S_Y]
+        up = st[S_UM]
+        for _ in range(n_sub):
+            y = mbw_step(p, y, um, up)
+            up = um
+        st[S_Y] = y
+        st[S_UM] = um
+        x = f[F_YS] * y + f[F_OFF]
+        if f[F_ASYM] != 0.0:
+            x = asymmetry_kernel(x, f[F_ASYM], f[F_XMID], f[F_HALF])
+        st[S_XQ] = x
+        if f[F_CREEP] != 0.0:
+            x = creep_kernel(x, creep_c, creep_a, f[F_CREEP])
+        if f[F_SAT] != 0.0:
+            x = saturation_kernel(x, f[F_SATLO], f[F_SATHI], f[F_SATW])
+        if f[F_DYN] != 0.0:
+            x = dynamics_kernel(dz, phi, gam, x)
+        st[S_X] = x
+        ym = x
+        if f[F_DR] != 0.0:
+            t0 = st[S_DT_T]
+            t1 = t0 + f[F_DT]
+            st[S_DRIFT] += (f[F_DR] * f[F_DT] + f[F_DA] * (math.sin(f[F_DW] * t1) - math.sin(f[F_DW] * t0))
+                            + f[F_DQ] * normals[k, 1])
+            st[S_DT_T] = t1
+            ym += st[S_DRIFT]
+        if f[F_NOISE] != 0.0:
+            ym += f[F_NOISE] * normals[k, 0]
+        if f[F_QUANT] != 0.0:
+            ym = f[F_QUANT] * math.floor(ym / f[F_QUANT] + 0.5)
+        st[S_T] += f[F_DT]
+        out_y[k] = ym
+        out_u[k] = ua
+        out_f[k] = flags
+        out_x[k] = x
+
+
+class Plant:
+    """A simulated stage; see the module docstring for the API and the signal chain.
+
+    Parameters
+    ----------
+    config : PlantConfig
+        The stage. The plant starts at rest at ``config.v_init`` (as after :meth:`reset`).
+
+    Raises
+    ------
+    ConfigError
+        The MBW parameters do not give a bounded loop over the voltage range.
+    """
+
+    def __init__(self, config: PlantConfig):
+        self._st = np.zeros(9)
+        self._out1 = (np.empty(1), np.empty(1), np.empty(1, np.int8), np.empty(1))
+        self._u1 = np.empty(1)
+        self._apply(config, initial=True)
+        self.reset()
+
+    @classmethod
+    def default(cls, rate: float = 1000.0, seed: int = 0) -> "Plant":
+        """The embedded PEA stage: ``pea_default()``, 0–150 V, 2 nm noise + 2 nm quantisation, ``dt = 1/rate``."""
+        return cls(PlantConfig.for_profile("pea", rate, seed=seed))
+
+    # Properties -------------------------------------------------------------------------------------------------
+    @property
+    def config(self) -> PlantConfig:
+        return self._cfg
+
+    @property
+    def dt(self) -> float:
+        return self._cfg.dt
+
+    @property
+    def time(self) -> float:
+        """Seconds since :meth:`reset` (samples taken × dt)."""
+        return float(self._st[S_T])
+
+    @property
+    def u_applied(self) -> float:
+        """Voltage applied at the last sample (V)."""
+        return float(self._st[S_UA])
+
+    @property
+    def position(self) -> float:
+        """True stage position at the last sample (m), before sensor effects; for evaluation, never published."""
+        return float(self._st[S_X])
+
+    @property
+    def stroke_range(self) -> tuple[float, float]:
+        """``(x_lo, x_hi)`` nominal displacement at ``v_min`` and ``v_max`` held (m)."""
+        return self._stroke
+
+    # Operation --------------------------------------------------------------------------------------------------
+    def reset(self, v0: float | None = None) -> None:
+        """Put the stage at rest at ``v0`` (V, default ``config.v_init``) and restart the random stream."""
+        c = self._cfg
+        v0 = c.v_init if v0 is None else float(v0)
+        if not c.v_min <= v0 <= c.v_max:
+            raise ConfigError(f"reset voltage {v0} V is outside [{c.v_min}, {c.v_max}] V")
+        um = v0 / c.mbw.u_scale
+        st = self._st
+        st[:] = 0.0
+        st[S_Y] = mbw_rest_state(self._p, um)
+        st[S_UM] = um
+        st[S_UA] = v0
+        self._rng = np.random.default_rng(c.seed)
+        self._normals = np.empty((0, 2))
+        self._npos = 0
+        x = c.mbw.y_scale * st[S_Y] + c.mbw.offset
+        if c.effects.asymmetry.enabled:
+            x = asymmetry_kernel(x, self._f[F_ASYM], self._f[F_XMID], self._f[F_HALF])
+        st[S_XQ] = x
+        st[S_X] = x  # at rest creep lags equal x, the dynamics are still, saturation is applied below
+        if c.effects.saturation.enabled:
+            st[S_X] = saturation_kernel(x, self._f[F_SATLO], self._f[F_SATHI], self._f[F_SATW])
+        self._init_states(set(c.effects.strengths()))
+
+    def step(self, u_cmd: float) -> StepResult:
+        """Apply one command (V) for one sample and read the sensor; NaN/inf commands hold the last voltage."""
+        self._u1[0] = u_cmd
+        oy, ou, of, ox = self._out1
+        self._advance(self._u1, oy, ou, of, ox)
+        return StepResult(float(oy[0]), float(ou[0]), bool(of[0]))
+
+    def run(self, u_cmd) -> RunResult:
+        """Apply a whole command record (V), continuing from the current state; equal to repeated :meth:`step`."""
+        u = np.ascontiguousarray(np.asarray(u_cmd, dtype=np.float64).reshape(-1))
+        n = u.shape[0]
+        out = RunResult(np.empty(n), np.empty(n), np.empty(n, np.int8), np.empty(n))
+        self._advance(u, out.y, out.u_applied, out.flags, out.x)
+        return out
+
+    def reconfigure(self, config: PlantConfig) -> None:
+        """Swap in a new configuration without resetting the stage.
+
+        The hysteresis state, applied voltage and time carry over; the state of every effect whose settings
+        changed (or that was switched on) starts at the current operating point, so switching an effect on does
+        not make the stage jump. A different ``dt`` re-discretises the effects and keeps their states.
+        """
+        old = self._cfg
+        self._apply(config, initial=False)
+        changed = {n for n in config.effects.strengths()
+                   if getattr(config.effects, n) != getattr(old.effects, n)}
+        if config.mbw != old.mbw or config.mbw_substeps != old.mbw_substeps:
+            self._st[S_UM] = self._st[S_UA] / config.mbw.u_scale  # keep y_model: no jump, only a new law
+        self._init_states(changed)
+
+    # Internals --------------------------------------------------------------------------------------------------
+    def _apply(self, cfg: PlantConfig, initial: bool) -> None:
+        if not isinstance(cfg, PlantConfig):
+            raise ConfigError("Plant needs a PlantConfig")
+        p = np.ascontiguousarray(cfg.mbw.vector)
+        stroke = cfg.stroke or _rest_stroke(cfg.mbw, p, cfg.v_min, cfg.v_max)
+        _check_bounded(cfg, p, stroke)
+        e = cfg.effects
+        lo, hi = stroke
+        span = hi - lo
+        f = np.zeros(24)
+        f[F_US], f[F_YS], f[F_OFF] = cfg.mbw.u_scale, cfg.mbw.y_scale, cfg.mbw.offset
+        f[F_VMIN], f[F_VMAX], f[F_STEP] = cfg.v_min, cfg.v_max, cfg.slew_max * cfg.dt
+        f[F_SUB], f[F_DT], f[F_DELAY] = cfg.mbw_substeps, cfg.dt, e.delay.strength
+        f[F_ASYM], f[F_XMID], f[F_HALF] = e.asymmetry.strength, 0.5 * (lo + hi), 0.5 * span
+        creep_a, f[F_CREEP] = e.creep.coefficients(cfg.dt)
+        if e.saturation.enabled:
+            s = e.saturation.strength * span
+            two = e.saturation.two_sided if e.saturation.two_sided is not None else cfg.v_min < 0.0 < cfg.v_max
+            f[F_SAT], f[F_SATW], f[F_SATHI] = 1.0, 2.0 * s, hi - s
+            f[F_SATLO] = lo + s if two else -math.inf
+        if e.dynamics.enabled:
+            phi, gam = e.dynamics.coefficients(cfg.dt)
+            f[F_DYN] = 1.0
+        else:
+            phi, gam = np.eye(2), np.zeros(2)
+        if e.drift.enabled:
+            d = e.drift
+            f[F_DR], f[F_DW] = d.strength, 2.0 * math.pi / d.period
+            f[F_DA] = d.sine * d.strength * d.period / (2.0 * math.pi)
+            f[F_DQ] = d.walk * d.strength * math.sqrt(cfg.dt)
+        f[F_NOISE], f[F_QUANT] = e.noise.strength, e.quantization.strength
+        self._cfg, self._p, self._f, self._stroke = cfg, p, f, (float(lo), float(hi))
+        self._creep_a, self._phi, self._gam = creep_a, phi, gam
+        if initial:
+            self._creep_c, self._dz, self._dbuf = np.zeros(0), np.zeros(2), np.zeros(0)
+
+    def _init_states(self, names: set[str]) -> None:
+        """Start the named effects' states at the current operating point."""
+        st = self._st
+        if "creep" in names or self._creep_c.shape != self._creep_a.shape:
+            self._creep_c = np.full(self._creep_a.shape[0], st[S_XQ])
+        if "dynamics" in names:
+            self._dz = np.array([st[S_X], 0.0])
+        if "delay" in names or self._dbuf.shape[0] != int(self._f[F_DELAY]):
+            self._dbuf = np.full(int(self._f[F_DELAY]), st[S_UA])
+            st[S_DIDX] = 0.0
+        if "drift" in names:
+            st[S_DT_T] = 0.0  # the drift offset itself carries over: no jump in the reading
+
+    def _take_normals(self, n: int) -> np.ndarray:
+        if self._f[F_NOISE] == 0.0 and self._f[F_DQ] == 0.0:
+            return np.zeros((n, 2)) if n > 1 else _ZERO_PAIR
+        avail = self._normals.shape[0] - self._npos
+        if avail < n:
+            blocks = [self._normals[self._npos:]]
+            need = n - avail
+            while need > 0:
+                blocks.append(self._rng.standard_normal((_NORMAL_BLOCK, 2)))
+                need -= _NORMAL_BLOCK
+            self._normals, self._npos = np.concatenate(blocks), 0
+        out = self._normals[self._npos:self._npos + n]
+        self._npos += n
+        return out
+
+    def _advance(self, u, oy, ou, of, ox) -> None:
+        nrm = self._take_normals(u.shape[0])
+        _plant_loop(u, self._p, self._f, self._st, self._creep_a, self._creep_c, self._phi, self._gam, self._dz,
+                    self._dbuf, nrm, oy, ou, of, ox)
+        if not math.isfinite(self._st[S_X]):
+            raise SimError("the simulated stage diverged (non-finite displacement); check the model parameters")
+
+
+_ZERO_PAIR = np.zeros((1, 2))
+
+
+def _rest_stroke(mbw: MBWParams, p: np.ndarray, v_min: float, v_max: float) -> tuple[float, float]:
+    lo = mbw.y_scale * mbw_rest_state(p, v_min / mbw.u_scale) + mbw.offset
+    hi = mbw.y_scale * mbw_rest_state(p, v_max / mbw.u_scale) + mbw.offset
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+        raise ConfigError("the MBW model has no finite, increasing rest displacement over [v_min, v_max]; "
+                          "check the params file")
+    return lo, hi
+
+
+def _check_bounded(cfg: PlantConfig, p: np.ndarray, stroke: tuple[float, float]) -> None:
+    """Refuse a model that diverges on a full-range 1 Hz and 50 Hz triangle sweep (a bad params file)."""
+    from hyst_model.core import mbw_simulate
+
+    span = stroke[1] - stroke[0]
+    for f_hz in (1.0, 50.0):
+        n = max(8, int(round(1.0 / (f_hz * cfg.dt))))
+        tri = 1.0 - np.abs(np.linspace(-1.0, 1.0, n))
+        u = (cfg.v_min + (cfg.v_max - cfg.v_min) * tri) / cfg.mbw.u_scale
+        y = cfg.mbw.y_scale * mbw_simulate(p, np.ascontiguousarray(np.tile(u, 2)), 0.0, np.nan)
+        if not (np.all(np.isfinite(y)) and np.max(np.abs(y)) < 100.0 * span + abs(cfg.mbw.offset)):
+            raise ConfigError(f"the MBW model diverges on a {f_hz:g} Hz full-range sweep; check the params file")
