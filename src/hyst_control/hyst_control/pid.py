@@ -105,34 +105,53 @@ class PID(BaseController):
 
 
 class OpenLoop(ModelBased):
-    """Inverse-model feedforward: u_k such that the model's predicted output equals r_k; no feedback."""
+    """Inverse-model feedforward: u_k such that the model's predicted output equals r_k; no feedback.
+
+    Bumpless start: the model state starts at the measurement, and whatever difference remains between the
+    command in force and the first feedforward command is faded out with time constant ``bump_tau`` (s);
+    the model is advanced with the pure feedforward part.
+    """
 
     name = "open_loop"
 
     def __init__(self, model: MBWParams, dt: float, limits: CommandLimits | None = None,
-                 zeta0: float = 1e-3, exact_rate: bool = True) -> None:
+                 zeta0: float = 1e-3, exact_rate: bool = True, bump_tau: float = 0.02) -> None:
         super().__init__(model, dt, limits)
         if not zeta0 > 0:
             raise ConfigError("zeta0 must be positive")
         self.zeta0 = zeta0
         self.exact_rate = exact_rate
+        if not bump_tau > 0:
+            raise ConfigError("bump_tau must be positive")
+        self._fade = math.exp(-dt / bump_tau)
         self._ym_state = 0.0
         self._nu = 0.0
+        self._uff = 0.0
+        self._bump = math.nan
 
     def _on_reset(self, y0: float, u0: float, r0: float) -> None:
         self._ym_state = self._ym(y0)
+        self._uff = u0
+        self._bump = math.nan  # measured at the first step
 
     def _law(self, r_k: float, y: float) -> float:
         ys, us, p = self._ys, self._us, self._p
         r_m = (r_k - self._off) / ys
         r_u = abs(r_k - self._r_prev) / ys
         y_r = r_m - p[6] * self._ym_state
-        nu = invert_nu(p, self._ym_state, y_r, self._u_prev / us, r_u, self.exact_rate, self.zeta0)
+        nu = invert_nu(p, self._ym_state, y_r, self._uff / us, r_u, self.exact_rate, self.zeta0)
         self._nu = nu
-        return (p[7] * self._u_prev / us + nu) * us
+        u_ff = (p[7] * self._uff / us + nu) * us
+        if self._bump != self._bump:
+            self._bump = self._u_prev - u_ff
+        else:
+            self._bump *= self._fade
+        return u_ff + self._bump
 
     def _commit(self, u: float) -> None:
-        self._ym_state = mbw_step(self._p, self._ym_state, u / self._us, self._u_prev / self._us)
+        u_ff = u - self._bump  # what the feedforward actually got through the limiter
+        self._ym_state = mbw_step(self._p, self._ym_state, u_ff / self._us, self._uff / self._us)
+        self._uff = u_ff
 
     def state(self) -> dict[str, float]:
         s = super().state()

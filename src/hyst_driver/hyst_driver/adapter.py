@@ -186,6 +186,9 @@ class AsciiAdapter(Adapter):
         for line in lines:
             if not line.strip():
                 continue
+            if not line.startswith(b"$"):  # noise before a frame start: reported, the frame may still be good
+                start = line.rfind(b"$")
+                events.append(BadFrame("garbage", f"{len(line) if start < 0 else start} bytes outside frames"))
             try:
                 msg = hdb.decode_reply(line)
             except ChecksumError as err:
@@ -199,7 +202,7 @@ class AsciiAdapter(Adapter):
                 if not self._plausible(v):
                     events.append(BadFrame("implausible", f"applied voltage {v} V"))
                     continue
-                if self._last_seq is not None:
+                if self._last_seq is not None and msg.seq != self._last_seq:  # equal: a re-read (RP), no gap
                     self.lost_samples += (msg.seq - self._last_seq - 1) % 0x10000
                 self._last_seq = msg.seq
                 events.append(Reading(msg.counts * self.counts_to_m, v, msg.seq))

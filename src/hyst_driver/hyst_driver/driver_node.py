@@ -47,6 +47,7 @@ class DriverConfig:
     slew_max: float
     command_timeout: float
     v_safe: float
+    safe_ramp_rate: float
     link_timeout: float
     frame_id: str
 
@@ -69,7 +70,8 @@ class DriverConfig:
         return self
 
     def limits(self) -> Limits:
-        return Limits(self.v_min, self.v_max, self.slew_max, self.v_safe, dt_max=1.0 / self.rate)
+        return Limits(self.v_min, self.v_max, self.slew_max, self.v_safe, dt_max=1.0 / self.rate,
+                      safe_ramp_rate=self.safe_ramp_rate)
 
 
 def _fp(lo: float, hi: float) -> list[FloatingPointRange]:
@@ -105,10 +107,13 @@ class DriverNode(Node):
         self.declare_parameter("v_max", hi, d(description="highest voltage ever sent, V", floating_point_range=_fp(lo, hi)))
         self.declare_parameter("slew_max", prof.slew_max, d(description="largest voltage rate, V/s",
                                                             floating_point_range=_fp(1e-3, 1e9)))
-        self.declare_parameter("command_timeout", 0.1, d(description="no command for this long (s): ramp to v_safe",
+        self.declare_parameter("command_timeout", 0.2, d(description="no command for this long (s): ramp to v_safe",
                                                          floating_point_range=_fp(1e-3, 3600)))
         self.declare_parameter("v_safe", prof.v_safe, d(description="voltage ramped to when commands stop and on "
                                                                     "shutdown, V", floating_point_range=_fp(lo, hi)))
+        self.declare_parameter("safe_ramp_rate", 100.0, d(description="rate of the ramp to v_safe (watchdog, "
+                                                                       "shutdown), V/s; capped at slew_max",
+                                                          floating_point_range=_fp(1e-3, 1e9)))
         self.declare_parameter("link_timeout", 0.5, d(description="no sample for this long (s): reconnect",
                                                       floating_point_range=_fp(0.005, 60)))
         self.declare_parameter("frame_id", "stage", d(description="header.frame_id of /stage/state"))
@@ -230,14 +235,22 @@ def main(args=None) -> int:
     code = 0
     try:
         node = DriverNode()
-        rclpy.spin(node)
+        try:
+            from rclpy.experimental import EventsExecutor  # lowest command latency (commands wake the I/O thread)
+            executor = EventsExecutor()
+        except ImportError:  # pragma: no cover - older rclpy
+            executor = rclpy.executors.SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (DriverError, ConfigError, ValueError) as err:  # bad user input: one line, non-zero exit
         print(f"hyst_driver_node: {err}", file=sys.stderr)
         code = 2
     except Exception as err:
-        if type(err).__module__.startswith(("hyst_", "rclpy")):
+        if node is not None and not rclpy.ok():
+            pass  # a callback tripped over the context going down under a signal: that is the shutdown
+        elif type(err).__module__.startswith(("hyst_", "rclpy")):
             print(f"hyst_driver_node: {err}", file=sys.stderr)
             code = 2
         else:
@@ -255,8 +268,8 @@ def main(args=None) -> int:
 
 
 def _ramp_seconds(cfg: DriverConfig) -> float:
-    """Time to ramp across the whole window at ``slew_max``, plus margin for a reconnect, at most 10 s."""
-    return min(10.0, (cfg.v_max - cfg.v_min) / cfg.slew_max + 1.0)
+    """Time to ramp across the whole window at the safe ramp rate, plus margin for a reconnect, at most 10 s."""
+    return min(10.0, (cfg.v_max - cfg.v_min) / min(cfg.slew_max, cfg.safe_ramp_rate) + 1.0)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Voltage safety: the one place the amplifier limits are enforced before any byte leaves the driver.
 
 Pure (no I/O, no clock): callers pass time steps. Invariants, proven by the property test
-``test/test_safety_property.py`` over random command streams including NaN, ±inf and huge values:
+``test/test_safety.py`` over random command streams including NaN, ±inf and huge values:
 
 1. every output lies in ``[v_min, v_max]`` — after rounding to the wire grid (:attr:`Limits.quantum`, 1 µV),
    so the decoded frame is inside the window too;
@@ -40,6 +40,8 @@ class Limits:
         Longest time step credited to the slew limit (s): one device sample period.
     quantum : float
         Wire resolution (V); outputs are multiples of it.
+    safe_ramp_rate : float
+        Rate (V/s) of ramps to ``v_safe`` (watchdog, shutdown), never above ``slew_max``; ``inf`` = ``slew_max``.
     """
 
     v_min: float
@@ -48,6 +50,7 @@ class Limits:
     v_safe: float
     dt_max: float = 1e-3
     quantum: float = 1e-6
+    safe_ramp_rate: float = math.inf
 
     def __post_init__(self) -> None:
         vals = (self.v_min, self.v_max, self.slew_max, self.v_safe, self.dt_max, self.quantum)
@@ -59,6 +62,8 @@ class Limits:
             raise ConfigError(f"v_safe ({self.v_safe} V) must lie in [v_min, v_max] = [{self.v_min}, {self.v_max}] V")
         if not self.slew_max > 0 or not self.dt_max > 0 or not self.quantum > 0:
             raise ConfigError("slew_max, dt_max and quantum must be positive")
+        if not self.safe_ramp_rate > 0:
+            raise ConfigError(f"safe_ramp_rate must be positive (inf = slew_max), got {self.safe_ramp_rate}")
         if self.hi_q < self.lo_q:
             raise ConfigError(f"window [{self.v_min}, {self.v_max}] V holds no multiple of {self.quantum} V")
 
@@ -109,6 +114,7 @@ class VoltageLimiter:
         self._limits = limits
         self._k = self._clamp_k(self._to_k(limits.v_safe if v0 is None else v0))
         self._target_k = self._k
+        self._safe = False
         self.counts = LimiterCounts()
 
     # ------------------------------------------------------------ state
@@ -168,11 +174,13 @@ class VoltageLimiter:
             self.counts.clipped += 1
         self.counts.accepted += 1
         self._target_k = kc
+        self._safe = False
         return True
 
     def request_safe(self) -> None:
-        """Target ``v_safe`` (watchdog, shutdown)."""
+        """Target ``v_safe`` (watchdog, shutdown), approached at ``min(slew_max, safe_ramp_rate)``."""
         self._target_k = self._clamp_k(round(self._limits.v_safe / self._limits.quantum))
+        self._safe = True
 
     def step(self, dt: float) -> float:
         """Advance the output toward the target by at most ``slew_max · min(dt, dt_max)``; return it (V).
@@ -182,7 +190,8 @@ class VoltageLimiter:
         lim = self._limits
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             dt = 0.0
-        max_dk = math.floor(lim.slew_max * min(dt, lim.dt_max) / lim.quantum)
+        rate = min(lim.slew_max, lim.safe_ramp_rate) if self._safe else lim.slew_max
+        max_dk = math.floor(rate * min(dt, lim.dt_max) / lim.quantum)
         dk = self._target_k - self._k
         if abs(dk) > max_dk:
             self.counts.slew_limited += 1

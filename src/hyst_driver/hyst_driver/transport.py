@@ -192,6 +192,7 @@ class DeviceLink:
         self._hs_deadline = 0.0
         self._hs_tries = 0
         self._seeded = False
+        self._seed: float | None = None
         self._wake_r, self._wake_w = os.pipe()
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
@@ -278,7 +279,7 @@ class DeviceLink:
                 h.last_link_error = self.transport.last_error or h.last_link_error
                 return
             self.adapter.reset()
-            h.state, h.identity, self._seeded, self._hs_tries = "handshake", "", False, 0
+            h.state, h.identity, self._seeded, self._hs_tries, self._seed = "handshake", "", False, 0, None
             self._send_handshake(now)
         data = self.transport.read()
         for ev in self.adapter.feed(data) if data else ():
@@ -301,7 +302,8 @@ class DeviceLink:
         self._hs_tries += 1
         self._hs_deadline = now + self.HANDSHAKE_TIMEOUT
         self.adapter.reset()
-        self.transport.write(self.adapter.stop() + self.adapter.identify() + self.adapter.read_once())
+        once = self.adapter.read_once
+        self.transport.write(self.adapter.stop() + self.adapter.identify() + once() + once())
 
     def _event(self, ev, now: float, out: list) -> None:
         h = self.health
@@ -309,9 +311,12 @@ class DeviceLink:
             self._last_rx, self._in_timeout = now, False
             h.applied_v = ev.applied_v
             if h.state == "handshake" and not self._seeded:
-                # Start from what the amplifier applies now: after a replug it may have reset to 0 V.
-                self.limiter.reset(ev.applied_v)
-                self._seeded = True
+                # Start from what the amplifier applies now (after a replug it may have reset to 0 V); two
+                # agreeing read-backs, so one corrupted line of an unchecked protocol cannot seed the limiter.
+                if self._seed is not None and abs(ev.applied_v - self._seed) <= 1e-3:
+                    self.limiter.reset(ev.applied_v)
+                    self._seeded = True
+                self._seed = ev.applied_v
                 return
             h.samples += 1
             out.append((now, ev))

@@ -27,7 +27,8 @@ def limits(draw):
         v_min = v_max - 1e-3
     v_safe = draw(st.floats(v_min, v_max, allow_nan=False))
     slew = draw(st.floats(1.0, 1e6, allow_nan=False))
-    return Limits(v_min, v_max, slew, v_safe, dt_max=1e-3)
+    safe_rate = draw(st.one_of(st.just(math.inf), st.floats(1e-3, 1e7)))
+    return Limits(v_min, v_max, slew, v_safe, dt_max=1e-3, safe_ramp_rate=safe_rate)
 
 
 requests = st.one_of(
@@ -46,19 +47,23 @@ def _decoded_volts(adapter, v: float) -> float:
 
 
 @settings(max_examples=300, deadline=None)
-@given(lim=limits(), v0=requests, stream=st.lists(st.tuples(requests, dts), min_size=1, max_size=60),
+@given(lim=limits(), v0=requests, stream=st.lists(st.tuples(requests, dts, st.booleans()), min_size=1, max_size=60),
        new_lim=st.one_of(st.none(), limits()))
 def test_no_out_of_limit_voltage_is_ever_encoded(lim, v0, stream, new_lim):
     adapters = (AsciiAdapter(), GcsAdapter())
     lim_now = lim
     limiter = VoltageLimiter(lim, v0)
     prev = limiter.value
-    for i, (req, dt) in enumerate(stream):
+    for i, (req, dt, watchdog) in enumerate(stream):
         swapped = False
         if new_lim is not None and i == len(stream) // 2:
             limiter.set_limits(new_lim)
             lim_now, swapped = new_lim, True
-        out = limiter.update(req, dt)
+        if watchdog:  # the command stream stopped: ramp to v_safe
+            limiter.request_safe()
+            out = limiter.step(dt)
+        else:
+            out = limiter.update(req, dt)
         assert lim_now.v_min <= out <= lim_now.v_max
         for ad in adapters:
             wire = _decoded_volts(ad, out)
@@ -104,6 +109,15 @@ def test_ramp_to_safe_and_limit_swap():
     assert lz.value == 1.0  # brought inside the new window at once
     lz.reset(math.nan)
     assert lz.value == 0.0
+
+
+def test_safe_ramp_rate_applies_to_ramps_to_safe_only():
+    lz = VoltageLimiter(Limits(0.0, 150.0, slew_max=1e5, v_safe=0.0, safe_ramp_rate=100.0), v0=150.0)
+    lz.request_safe()
+    assert lz.step(1e-3) == 149.9                      # 100 V/s, not 100 V per sample
+    assert lz.update(20.0, 1e-3) == 49.9               # a real command moves at slew_max (100 V per sample)
+    with pytest.raises(ConfigError):
+        Limits(0.0, 1.0, 1.0, 0.0, safe_ramp_rate=0.0)
 
 
 def test_output_is_on_the_wire_grid_at_awkward_limits():

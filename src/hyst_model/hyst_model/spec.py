@@ -43,7 +43,15 @@ def build_model(base: str, effects: Sequence[str] = (), config: Mapping[str, obj
     model = factory(config)  # each factory picks the keys it needs and ignores the rest
     if not effects:
         return model
-    from .effects import compose  # noqa: PLC0415
+    try:
+        from .effects import EFFECTS, compose  # noqa: PLC0415
+    except ImportError as err:
+        raise EffectError(f"effects {', '.join(effects)} requested but no effects are available in this "
+                          f"installation ({err})") from None
+    unknown = [e for e in effects if e not in EFFECTS]
+    if unknown:
+        raise EffectError(f"unknown effect(s) {', '.join(map(repr, unknown))}; "
+                          f"available: {', '.join(sorted(EFFECTS)) or 'none'}")
     try:
         return compose(model, list(effects), config)
     except KeyError as err:

@@ -42,7 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--topic", default="/stage/state", help="state topic in a bag (default /stage/state)")
     p.add_argument("--columns", metavar="T,U,Y", help="CSV column names of time, input, output")
     p.add_argument("--units", metavar="T,U,Y", help="CSV units of those columns, e.g. s,V,um")
-    p.add_argument("--window", metavar="T0:T1", help="compare only samples with T0 <= t < T1 (s)")
+    p.add_argument("--window", metavar="T0:T1",
+                   help="score only samples with T0 <= t < T1 (s); the model still runs over the whole record")
     p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
                    help="Python file with user effects the params file uses (repeatable)")
     p.add_argument("--levels", type=int, default=5, help="number of input-level bins (default 5)")
@@ -66,13 +67,17 @@ def _window(text: str | None) -> tuple[float, float]:
     return t0, t1
 
 
-def compare_record(record, model, theta, *, n_levels: int = 5, max_lag: int = 25):
+def compare_record(record, model, theta, *, n_levels: int = 5, max_lag: int = 25,
+                   window: tuple[float, float] = (-np.inf, np.inf)):
     """Model output and :class:`~hyst_model.diagnose.stats.CompareStats` of ``model`` at ``theta`` on ``record``.
+
+    The model runs over the whole record (a hysteretic state depends on the input history) in simulation mode;
+    only samples with ``window[0] <= t < window[1]`` are scored. Returns ``(scored_record, yhat, stats)``.
 
     Raises
     ------
     HystError
-        The model produces non-finite output on this input (diverges) or the record is too short.
+        The model produces non-finite output on this input (diverges), or the window holds too few samples.
     """
     from ..diagnose.stats import compare_stats
     try:
@@ -83,15 +88,20 @@ def compare_record(record, model, theta, *, n_levels: int = 5, max_lag: int = 25
         raise HystError(f"the model cannot be run on {record.source}: {err}") from err
     if yhat.shape != record.y.shape:
         raise HystError(f"model output has {yhat.size} samples for {record.y.size} inputs")
+    m = (record.t >= window[0]) & (record.t < window[1])
+    if m.sum() < 20:
+        raise DataError(f"{record.source}: no samples in the window ({int(m.sum())} found, at least 20 needed)")
+    rec = record.between(*window) if not m.all() else record
+    yhat = yhat[m]
     if not np.all(np.isfinite(yhat)):
         k = int(np.flatnonzero(~np.isfinite(yhat))[0])
-        raise HystError(f"the model diverges on this input (non-finite output from t={record.t[k]:.4g} s); "
+        raise HystError(f"the model diverges on this input (non-finite output from t={rec.t[k]:.4g} s); "
                         "was it fitted on a comparable input range and sample rate?")
     try:
-        st = compare_stats(record.t, record.u, record.y, yhat, n_levels=n_levels, max_lag=max_lag)
+        st = compare_stats(rec.t, rec.u, rec.y, yhat, n_levels=n_levels, max_lag=max_lag)
     except ValueError as err:
-        raise DataError(f"{record.source}: {err}") from err
-    return yhat, st
+        raise DataError(f"{rec.source}: {err}") from err
+    return rec, yhat, st
 
 
 def _um(x: float) -> str:
@@ -108,11 +118,15 @@ def findings(st) -> list[str]:
     out: list[str] = []
     o = st.overall
     noise = st.noise_sigma
-    if noise > 0 and o.rmse < 2.0 * noise:
+    if noise > 0 and o.rmse < 1.25 * noise:
         out.append(f"The residual ({_um(o.rmse)} RMS) is at the sensor noise level ({_um(noise)}): "
                    "nothing left to explain.")
-    if abs(o.bias) > 0.5 * o.rmse and o.rmse > 0:
-        out.append(f"Most of the error is a constant offset ({_um(o.bias)}): check the fitted offset / zero.")
+    elif noise > 0 and o.rmse < 3.0 * noise:
+        out.append(f"The residual ({_um(o.rmse)} RMS) is {o.rmse / noise:.1f}× the output noise ({_um(noise)}): "
+                   "small, but the tests below say whether it is structured.")
+    if o.rmse > 0 and abs(o.bias) > 0.7 * o.rmse:
+        out.append(f"{100 * (o.bias / o.rmse) ** 2:.0f} % of the error power is a constant offset ({_um(o.bias)}): "
+                   "check the fitted offset / the sensor zero.")
     segs = [s for s in st.segments if s.fit.n >= 10 and np.isfinite(s.fit.rmse)]
     if len(segs) > 1:
         w = max(segs, key=lambda s: s.fit.rmse)
@@ -123,10 +137,27 @@ def findings(st) -> list[str]:
         if len(sines) >= 2 and sines[-1].fit.rmse > 1.5 * sines[0].fit.rmse:
             out.append(f"The error grows with frequency ({sines[0].freq:.3g} Hz: {_um(sines[0].fit.rmse)}, "
                        f"{sines[-1].freq:.3g} Hz: {_um(sines[-1].fit.rmse)}): rate dependence or dynamics.")
-        holds = [s for s in segs if s.kind in ("hold", "step")]
-        if holds and max(h.fit.rmse for h in holds) > 1.5 * o.rmse:
-            out.append("Held inputs fit worse than moving ones: the model misses slow behaviour after steps "
-                       "(creep, drift) or the rest level.")
+        for h in (s for s in segs if s.kind == "hold"):
+            if abs(h.fit.bias) > 0.7 * h.fit.rmse and abs(h.fit.bias) > max(3 * noise, 0.5 * o.rmse):
+                where = "above" if h.fit.bias > 0 else "below"
+                out.append(f"While the input is held ({h.label}, {h.t0:.3g}–{h.t1:.3g} s) the measured output sits "
+                           f"{_um(abs(h.fit.bias))} {where} the model: the rest level differs (offset, creep or "
+                           "drift, or an input history before the record that the model does not know).")
+    for r in st.extra.get("ringing") or []:
+        out.append(f"After the step at t = {r['t']:.4g} s the output rings at ≈{r['freq']:.3g} Hz "
+                   f"({_um(r['rms'])} RMS in the first 50 ms): a resonance of the stage the model lacks "
+                   "(try the dynamics effect; sample fast enough to see it).")
+    hm = st.extra.get("harmonics")
+    if hm and hm["share"] > 0.3:
+        amp = np.asarray(hm["amplitudes"])
+        top = np.argsort(amp)[::-1][:3]
+        odd = float(np.sum(amp[0::2] ** 2))
+        even = float(np.sum(amp[1::2] ** 2))
+        kind = ("mostly odd harmonics: a symmetric loop-shape error" if odd > 2 * even else
+                "mostly even harmonics: an asymmetric loop (different rising/falling or top/bottom curvature)"
+                if even > 2 * odd else "odd and even harmonics: shape and asymmetry errors")
+        out.append(f"{100 * hm['share']:.0f} % of the residual during the {hm['freq']:.3g} Hz sine repeats with the "
+                   "drive (" + ", ".join(f"{k + 1}× {_um(amp[k])}" for k in top) + f"): {kind}, not noise.")
     br = st.branches
     r, f = br["rising"], br["falling"]
     if r.n > 10 and f.n > 10 and np.isfinite(r.bias) and np.isfinite(f.bias):
@@ -158,7 +189,8 @@ def findings(st) -> list[str]:
              "e2_u2": "the error size follows the input magnitude"}
     for k in ("e_u2", "e_absdu", "e2_u", "e2_u2"):
         if k in ho:
-            out.append(f"Higher-order test {k} ({ho[k].max_abs:.2f} > ±{ho[k].bound:.3f}): {words[k]}.")
+            out.append(f"Higher-order test {k} ({ho[k].max_abs:.2f} > ±{ho[k].bound:.3f}, i.e. about "
+                       f"{100 * ho[k].max_abs ** 2:.0f} % of the residual variance): {words[k]}.")
     if not st.auto.significant:
         out.append("The residual is white within the 99 % bounds.")
     return out
@@ -208,9 +240,6 @@ def _load(args) -> tuple[Any, Any, Any, np.ndarray]:
     model = spec.model()
     theta = spec.theta(model)
     rec = load_record(args.data, topic=args.topic, columns=args.columns, units=args.units)
-    t0, t1 = _window(args.window)
-    if np.isfinite(t0) or np.isfinite(t1):
-        rec = rec.between(t0, t1)
     rec.check()
     return spec, rec, model, theta
 
@@ -219,13 +248,14 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of ``hyst compare``; returns the exit code."""
     if args.levels < 1 or args.lags < 1:
         raise DataError("--levels and --lags must be at least 1")
+    window = _window(args.window)
     spec, rec, model, theta = _load(args)
     notes = []
     dt_fit = spec.config.get("dt")
     if isinstance(dt_fit, (int, float)) and dt_fit > 0 and abs(rec.dt / dt_fit - 1.0) > 0.02:
         notes.append(f"note: the model was fitted at a {dt_fit * 1e3:.4g} ms sample period, this record has "
                      f"{rec.dt * 1e3:.4g} ms; per-sample models do not transfer across sample rates")
-    yhat, st = compare_record(rec, model, theta, n_levels=args.levels, max_lag=args.lags)
+    rec, yhat, st = compare_record(rec, model, theta, n_levels=args.levels, max_lag=args.lags, window=window)
     report_dir = None
     if args.report:
         from ..diagnose.report import write_report

@@ -74,21 +74,29 @@ def mbw_step(p: np.ndarray, y_prev: float, u: float, u_prev: float) -> float:
 
 @njit(cache=True)
 def mbw_rest_state(p: np.ndarray, u0: float, max_steps: int = 200000, tol: float = 1e-13) -> float:
-    """Output the recursion settles to when the input has been held at ``u0`` for a long time.
+    r"""Output the recursion settles to when the input has been held at ``u0`` for a long time.
 
-    With δ2 < 1 a constant input keeps ν = (1-δ2)·u0 ≠ 0, so the state is not zero at rest; this runs the
-    recursion on the constant input until it stops moving (a contraction whenever the model is bounded).
-    A non-finite or non-settling result returns the last value; callers check finiteness.
+    At constant input v = 0 and ν = (1 − δ2)·u0, so (3.21) is the affine map y ← a·y + ζ1·ν with
+    a = δ1 − ψ1|ν| − α1·ν·sgn(y). Started from y = 0 the state takes the sign s of ζ1·ν at once and converges
+    (for |a| < 1) to the fixed point
+
+    .. math::  y^* = \frac{\zeta_1 \nu}{1 - \delta_1 + \psi_1 |\nu| + \alpha_1 \nu s},
+
+    returned in closed form (the iteration it replaces needed ~10⁴ steps for δ1 ≈ 1). ν = 0 (δ2 = 1 or u0 = 0)
+    gives 0. A map that does not contract (|a| ≥ 1) has no rest state: NaN, which callers treat as divergence.
+    ``max_steps`` and ``tol`` are kept for signature compatibility and unused.
     """
-    y = 0.0
-    for _ in range(max_steps):
-        y_new = mbw_step(p, y, u0, u0)
-        if not np.isfinite(y_new):
-            return y_new
-        if abs(y_new - y) <= tol * (1.0 + abs(y_new)):
-            return y_new
-        y = y_new
-    return y
+    nu = (1.0 - p[7]) * u0
+    if nu == 0.0:
+        return 0.0
+    b = p[0] * nu
+    if b == 0.0:
+        return 0.0
+    s = 1.0 if b > 0 else -1.0
+    den = 1.0 - p[6] + p[2] * abs(nu) + p[4] * nu * s
+    if not (0.0 < den < 2.0):
+        return np.nan
+    return b / den
 
 
 @njit(cache=True)

@@ -9,8 +9,8 @@ Differentiating (3.21) with respect to θ = (ζ1, ζ2, ψ1, ψ2, α1, α2, δ1, 
     \\mathrm{sgn}(y_{k-1})
 
 with ∂ν/∂δ2 = −u_{k−1}. It runs alongside the recursion in the same loop (numba), so a full Jacobian costs about
-two simulations instead of nine. The start from rest (:func:`hyst_model.core.mbw.mbw_rest_state`) is
-differentiated the same way by iterating the recursion and its sensitivity on the held input.
+two simulations instead of nine. The start from rest (:func:`hyst_model.core.mbw.mbw_rest_state`, closed form)
+is differentiated analytically.
 """
 from __future__ import annotations
 
@@ -46,19 +46,25 @@ def _sens_step(p, yp, u, up, S_prev, S_out):
 
 @njit(cache=True)
 def mbw_rest_state_sens(p: np.ndarray, u0: float, max_steps: int = 200000, tol: float = 1e-13):
-    """Rest state (see :func:`mbw_rest_state`) and its gradient with respect to the 8 parameters."""
-    y = 0.0
+    """Rest state (closed form, see :func:`hyst_model.core.mbw.mbw_rest_state`) and its gradient (8,)."""
     S = np.zeros(8)
-    S2 = np.zeros(8)
-    for _ in range(max_steps):
-        y_new = mbw_step(p, y, u0, u0)
-        _sens_step(p, y, u0, u0, S, S2)
-        S[:] = S2
-        if not np.isfinite(y_new):
-            return y_new, S
-        if abs(y_new - y) <= tol * (1.0 + abs(y_new)):
-            return y_new, S
-        y = y_new
+    nu = (1.0 - p[7]) * u0
+    b = p[0] * nu
+    if nu == 0.0 or b == 0.0:
+        # y* = 0 for every nearby θ except through ζ1·ν: dy*/dζ1 = ν/den is still defined when only ζ1 = 0
+        return 0.0, S
+    s = 1.0 if b > 0 else -1.0
+    snu = 1.0 if nu > 0 else -1.0
+    den = 1.0 - p[6] + p[2] * abs(nu) + p[4] * nu * s
+    if not (0.0 < den < 2.0):
+        return np.nan, S
+    y = b / den
+    S[0] = nu / den
+    S[2] = -y * abs(nu) / den
+    S[4] = -y * nu * s / den
+    S[6] = y / den
+    dy_dnu = p[0] / den - y / den * (p[2] * snu + p[4] * s)
+    S[7] = -u0 * dy_dnu
     return y, S
 
 

@@ -31,11 +31,13 @@ import numpy as np
 
 from ..errors import DataError, EffectError, FitError
 from ..effects import EFFECTS, compose
+from ..effects.compose import Frozen
 from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len, noise_floor, sample_time
 from ..model import Model
 
-__all__ = ["Candidate", "Rung", "Diagnosis", "diagnose", "validation_mask", "MIN_TRAIN", "MIN_VALID"]
+__all__ = ["Candidate", "Rung", "Diagnosis", "diagnose", "refit", "default_fitter", "validation_mask", "candidate_names",
+           "MIN_TRAIN", "MIN_VALID", "SPLIT"]
 
 #: Fewest samples for training / validation; below → FitError("too little data for validation").
 MIN_TRAIN = 700
@@ -111,7 +113,8 @@ class Diagnosis:
             "baseline": {"model": self.base, "rmse": self.baseline_rmse, "rmse_train": self.baseline_rmse_train},
             "noise_floor": self.noise,
             "candidates": [{"effect": c.effect, "rmse": c.rmse, "improvement": c.improvement,
-                            "significant": c.significant, "score": c.score, "evidence": c.evidence,
+                            "significant": c.significant, "score": c.score, "t_stat": c.t_stat,
+                            "evidence": c.evidence,
                             "params": c.params} for c in self.candidates],
             "missing": self.missing,
             "ladder": [asdict(r) for r in self.ladder],
@@ -135,40 +138,79 @@ def _rmse(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e * e))) if e.size else float("nan")
 
 
-def _paired_t(e_base: np.ndarray, e_new: np.ndarray, chunks: int = 20) -> float:
-    """t statistic of mean(e_base² − e_new²) over contiguous chunks (residuals are correlated in time)."""
+def _paired_t(e_base: np.ndarray, e_new: np.ndarray, chunks: int = 40) -> float:
+    """Robust t statistic of the squared-error reduction mean(e_base² − e_new²) over contiguous chunks.
+
+    Residuals are correlated in time, so the reduction is averaged per chunk. Its spread is taken from the
+    median absolute deviation of the chunk means: a real effect often shows in a few chunks only (a delay only
+    where the input moves), which would inflate a plain standard deviation and hide it, while chunks where
+    neither model errs beyond noise measure the chance fluctuation.
+    """
     d = e_base * e_base - e_new * e_new
     parts = np.array_split(d, chunks)
     means = np.array([p.mean() for p in parts if p.size])
-    if means.size < 3:
+    if means.size < 5:
         return 0.0
-    sd = float(means.std(ddof=1))
-    if sd == 0.0:
-        return math.inf if means.mean() > 0 else 0.0
-    return float(means.mean() / (sd / math.sqrt(means.size)))
+    scale = 1.4826 * float(np.median(np.abs(means - np.median(means))))
+    scale = max(scale, 1e-3 * float(np.std(means)), 1e-300)
+    return float(np.mean(means) / (scale / math.sqrt(means.size)))
 
 
-def _fit(model: Model, t, u, y, train: np.ndarray, theta0: np.ndarray | None, fitter) -> tuple[np.ndarray, np.ndarray]:
-    """Fit ``model`` on the training samples; return (theta, free-run prediction over the whole record)."""
-    theta = fitter(model, t, u, y, train, theta0)
-    yhat = model.simulate(theta, t, u)
+def _simulate(model: Model, theta, t, u) -> np.ndarray:
+    with np.errstate(all="ignore"):
+        yhat = np.asarray(model.simulate(theta, t, u), dtype=np.float64)
     if not np.all(np.isfinite(yhat)):
         raise FitError(f"{model.name}: the fitted model diverges on this record")
-    return theta, yhat
+    return yhat
 
 
-def default_fitter(model: Model, t, u, y, train: np.ndarray, theta0: np.ndarray | None) -> np.ndarray:
+def default_fitter(model: Model, t, u, y, theta0: np.ndarray | None) -> np.ndarray:
     """Fit with :func:`hyst_model.identify.fit` on the training window; returns θ.
 
-    Without a start (the base model) the fast method (equation-error starts + output-error least squares);
-    with one (base + effect from the base fit and the effect's data-driven start) bounded least squares from it.
+    Without a start: the fast method (equation-error starts + output-error least squares); with one: bounded
+    least squares from it. Both use the same split, so validation numbers match ``hyst fit``.
     """
     from .. import identify  # late: identification imports models; keep diagnose importable on its own
     if theta0 is None:
         res = identify.fit(model, t, u, y, method="fast", split=SPLIT)
     else:
-        res = identify.fit(model, t, u, y, method="lsq", split=SPLIT, theta0=theta0, max_nfev=60)
+        res = identify.fit(model, t, u, y, method="lsq", split=SPLIT, theta0=theta0, max_nfev=80)
     return np.asarray(res.theta, dtype=np.float64)
+
+
+def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_base: np.ndarray,
+          carry: dict | None = None, fitter=None, two_stage: bool = True
+          ) -> tuple[ComposedModel, np.ndarray, np.ndarray]:
+    """Fit base + effects in two stages; return (model, θ, free-run prediction).
+
+    1. Each effect's data-driven start (:meth:`Effect.start` on the base model's residual), overridden by
+       ``carry`` (namespaced values from an earlier fit, e.g. the screening level — effect parameters are
+       physical, so they carry across sample rates; base parameters do not);
+    2. the base refitted with the effects frozen at those values (a base fitted without an effect is distorted
+       by it, and a joint fit from there can stall);
+    3. everything jointly from there.
+
+    With ``two_stage=False`` step 2 is skipped — for refits whose effect parameters are already good (carried
+    from the screening level), where the joint fit alone converges and costs a fraction.
+    """
+    fitter = fitter or default_fitter
+    m = compose(base_model, list(names), cfg)
+    th0 = m.start(t, u, y, theta_base)
+    if carry:
+        nm = m.names
+        for k, v in carry.items():
+            if k in nm and "." in k:
+                th0[nm.index(k)] = v
+        lo, hi = m.bounds
+        th0 = np.clip(th0, lo, hi)
+    th1 = th0
+    if two_stage:
+        tb, tes = m.split(th0)
+        frozen = ComposedModel(base_model, [Frozen(e, te) for e, te in zip(m.effects, tes)])
+        th1 = th0.copy()
+        th1[: tb.size] = fitter(frozen, t, u, y, None)
+    th = fitter(m, t, u, y, th1)
+    return m, th, _simulate(m, th, t, u)
 
 
 def _scales(u: np.ndarray, y: np.ndarray) -> dict:
@@ -210,7 +252,7 @@ def candidate_names(base_model: Model, names: Sequence[str] | None = None) -> li
 
 def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None, fitter=None,
              min_factor: float = 1.1, t_min: float = 3.0, noise_margin: float = 1.25,
-             screen_samples: int = 20000, full_rate_top: int = 3, max_rungs: int = 3,
+             screen_samples: int = 12000, full_rate_top: int = 2, max_rungs: int = 3,
              progress: bool | Callable = False) -> Diagnosis:
     """Fit ``base``, test each effect by its residual signature and a validated refit, name the missing one.
 
@@ -222,21 +264,22 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     effects : sequence of str, optional
         Candidates; default every registered effect that applies to ``base``.
     fitter : callable, optional
-        ``fitter(model, t, u, y, train_mask, theta0) -> theta``; default :func:`default_fitter`.
+        ``fitter(model, t, u, y, theta0) -> theta`` fitting on the training window; default
+        :func:`default_fitter` (:func:`hyst_model.identify.fit`).
     min_factor : float
-        A candidate must divide the validation RMSE by at least this much.
+        A candidate must divide the validation RMSE by at least this much ...
     t_min : float
-        ... and reduce the squared error with paired t above this over validation chunks.
+        ... and reduce the squared error with a paired t statistic above this (20 validation chunks).
     noise_margin : float
         Baseline validation RMSE below ``noise_margin × noise floor`` → nothing is missing.
     screen_samples : int
         Longer records are screened on a decimated copy of about this many samples.
     full_rate_top : int
-        How many screened candidates are refitted at full rate.
+        How many screened candidates are refitted at full rate (the ladder refits its rungs too).
     max_rungs : int
         Effects in the ladder at most.
     progress : bool or callable
-        Print progress lines on stderr.
+        Print progress lines on stderr (or pass each line to a callable).
 
     Raises
     ------
@@ -254,167 +297,150 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
         raise DataError("the record contains non-finite values")
     n = t.size
+    need = int(math.ceil(max(MIN_TRAIN / (1 - SPLIT), MIN_VALID / SPLIT)))
+    if n < need:
+        raise FitError(f"too little data for validation: {n} samples; diagnose holds out the last "
+                       f"{SPLIT:.0%} and needs at least {need} samples")
     val = validation_mask(n)
-    if (~val).sum() < MIN_TRAIN or val.sum() < MIN_VALID:
-        raise FitError(f"too little data for validation: {n} samples; diagnose needs at least "
-                       f"{int(np.ceil((MIN_TRAIN + MIN_VALID) / 1.0))} (30 % are held out)")
-    fitter = fitter or default_fitter
+    train = ~val
+    fit_ = fitter or default_fitter
     dt = sample_time(t)
     cfg = dict(_scales(u, y), dt=dt)
-    cfg["drift.span"] = float(t[~val][-1] - t[0])  # drift knots cover the training span
+    cfg["drift.span"] = float(t[train][-1] - t[0])  # drift knots cover the training span
     base_model = build_model(base, (), cfg)
     names = candidate_names(base_model, effects)
     q = max(1, int(math.ceil(n / screen_samples)))
-    n_steps = 2 + len(names) + (min(full_rate_top, len(names)) if q > 1 else 0) + max_rungs
+    n_steps = 2 + len(names) + (1 if q > 1 else 0) + min(full_rate_top, len(names)) + max_rungs
     say = progress if callable(progress) else _Progress(bool(progress), n_steps)
-
     noise = noise_floor(y)
-    train = ~val
 
-    # --- screening level: decimated copy for long records -------------------------------------------------
-    def level(tt, uu, yy):
-        vv = validation_mask(tt.size)
-        bm = build_model(base, (), dict(cfg, dt=sample_time(tt)))
-        th, yh = _fit(bm, tt, uu, yy, ~vv, None, fitter)
-        return vv, bm, th, yh
-
-    say(f"fitting base model {base} on {n} samples ({(~val).sum()} train, {val.sum()} validation)")
-    vs, bm_full, th_base, yh_base = level(t, u, y)
-    e_base = y - yh_base
+    say(f"fitting base model {base} on {n} samples ({train.sum()} train, {val.sum()} validation)")
+    th_base = fit_(base_model, t, u, y, None)
+    e_base = y - _simulate(base_model, th_base, t, u)
     base_val, base_tr = _rmse(e_base[val]), _rmse(e_base[train])
-    say(f"base {base}: validation RMSE {fmt_len(base_val)}, noise floor {fmt_len(noise)}", step=False)
+    at_floor = base_val <= noise_margin * noise
+    say(f"base {base}: validation RMSE {fmt_len(base_val)}, noise floor {fmt_len(noise)}"
+        + (" (at the noise floor)" if at_floor else ""), step=False)
 
+    # --- screening: every candidate, on a decimated copy of long records ----------------------------------
     if q > 1:
         ts, us, ys = t[::q], u[::q], y[::q]
         say(f"screening on a 1:{q} decimated copy ({ts.size} samples)")
-        vs_s, bm_s, th_s, yh_s = level(ts, us, ys)
+        cfg_s = dict(cfg, dt=sample_time(ts))
+        bm_s = build_model(base, (), cfg_s)
+        th_s = fit_(bm_s, ts, us, ys, None)
+        vs = validation_mask(ts.size)
+        base_val_s = _rmse((ys - _simulate(bm_s, th_s, ts, us))[vs])
     else:
-        ts, us, ys, vs_s, bm_s, th_s, yh_s = t, u, y, val, bm_full, th_base, yh_base
-    e_s = ys - yh_s
-    base_val_s = _rmse(e_s[vs_s])
-
+        ts, us, ys, cfg_s, bm_s, th_s, vs, base_val_s = t, u, y, cfg, base_model, th_base, val, base_val
+    e_s = ys - _simulate(bm_s, th_s, ts, us)
     cands: dict[str, Candidate] = {}
-    fitted: dict[str, tuple] = {}
-    screened: list[tuple[float, str]] = []
+    carry: dict[str, dict] = {}
+    full: dict[str, tuple] = {}
     for name in names:
         tc = time.perf_counter()
-        m = compose(bm_s, [name], cfg)
+        probe = compose(bm_s, [name], cfg_s)
         try:
-            score, ev = m.effects[-1].signature(ts, us, e_s, sample_time(ts))
+            score, ev = probe.effects[-1].signature(ts, us, e_s, sample_time(ts))
+            score = float(np.clip(score, 0.0, 1.0))
         except Exception as err:  # noqa: BLE001 - a user effect's test must not sink the diagnosis
-            score, ev = 0.0, f"signature failed ({type(err).__name__}: {err})"
+            score, ev = 0.0, f"its residual test failed ({type(err).__name__}: {err})"
         try:
-            th0 = m.start(ts, us, ys, th_s)
-            th, yh = _fit(m, ts, us, ys, ~vs_s, th0, fitter)
-            r = _rmse((ys - yh)[vs_s])
+            m, th, yh = refit(bm_s, [name], cfg_s, ts, us, ys, th_s, fitter=fit_)
+            r = _rmse((ys - yh)[vs])
+            carry[name] = {k: v for k, v in m.unpack(th).items() if "." in k}
+            if q == 1:
+                full[name] = (m, th, y - yh)
         except FitError as err:
-            r, th = math.inf, None
+            r = math.inf
             ev = f"{ev}; refit failed: {err}"
-        screened.append((r, name))
-        cands[name] = Candidate(name, r, math.nan, base_val_s / r if r > 0 else math.inf, False,
-                                float(score), ev)
-        fitted[name] = (m, th)
-        say(f"{base}+{name}: validation RMSE {fmt_len(r)} ({base_val_s / r:.2f}×), signature {score:.2f}, "
+        cands[name] = Candidate(name, r * base_val / base_val_s if q > 1 else r, math.nan,
+                                base_val_s / r if r > 0 else math.inf, False, score, ev, params=carry.get(name, {}))
+        say(f"{base}+{name}: validation RMSE {fmt_len(r)} ({base_val_s / r:.2f}×), residual test {score:.2f}, "
             f"{time.perf_counter() - tc:.1f} s")
 
-    # --- full rate for the best screened candidates -------------------------------------------------------
-    screened.sort()
-    if q > 1:
-        keep = [nm for r, nm in screened[:full_rate_top] if np.isfinite(r)]
-        for nm in [x for _, x in screened[full_rate_top:]]:
-            c = cands[nm]
-            c.rmse = c.rmse / base_val_s * base_val  # scaled estimate, marked as screened in the evidence
-            c.evidence += " (screened on decimated data only)"
-        for name in keep:
-            m = compose(bm_full, [name], cfg)
-            th0 = m.start(t, u, y, th_base)
-            _carry(th0, m, fitted[name])
+    order = sorted(cands.values(), key=lambda c: c.rmse)
+    if q > 1:  # full rate for the best screened candidates
+        for c in order[:full_rate_top]:
+            if not np.isfinite(c.rmse) or (at_floor and c.improvement < min_factor):
+                continue
             try:
-                th, yh = _fit(m, t, u, y, train, th0, fitter)
+                m, th, yh = refit(base_model, [c.effect], cfg, t, u, y, th_base, carry.get(c.effect), fit_,
+                                  two_stage=q == 1)
             except FitError:
-                th, yh = th0, m.simulate(th0, t, u)
-            fitted[name] = (m, th)
-            say(f"full rate {base}+{name}: validation RMSE {fmt_len(_rmse((y - yh)[val]))}")
-    # Final numbers at full rate for everything refitted there.
-    for name, (m, th) in list(fitted.items()):
+                continue
+            full[c.effect] = (m, th, y - yh)
+            say(f"full rate {m.name}: validation RMSE {fmt_len(_rmse((y - yh)[val]))}")
+        for c in order[full_rate_top:]:
+            c.evidence += " (screened on a decimated copy only)"
+    for name, (m, th, e) in full.items():
         c = cands[name]
-        if th is None or (q > 1 and name not in [x for _, x in screened[:full_rate_top]]):
-            continue
-        e = y - m.simulate(th, t, u)
         c.rmse, c.rmse_train = _rmse(e[val]), _rmse(e[train])
         c.improvement = base_val / c.rmse if c.rmse > 0 else math.inf
         c.t_stat = _paired_t(e_base[val], e[val])
         c.params = {k: v for k, v in m.unpack(th).items() if "." in k}
-    at_floor = base_val <= noise_margin * noise
+        carry[name] = c.params
     for c in cands.values():
-        c.significant = bool(not at_floor and c.improvement >= min_factor and c.t_stat >= t_min)
-        c.evidence = _explain(c, base, base_val)
+        c.significant = bool(not at_floor and c.effect in full and c.improvement >= min_factor
+                             and c.t_stat >= t_min)
     ranked = sorted(cands.values(), key=lambda c: (not c.significant, c.rmse))
 
     # --- error ladder -------------------------------------------------------------------------------------
     ladder = [Rung(base, [], base_val, base_tr)]
-    models = {base: (bm_full, th_base)}
+    models: dict[str, tuple] = {base: (base_model, th_base)}
     chosen: list[str] = []
-    if not at_floor and ranked and ranked[0].significant:
+    if ranked and ranked[0].significant:
         best = ranked[0]
-        m, th = fitted[best.effect]
+        m, th, e = full[best.effect]
         chosen.append(best.effect)
         ladder.append(Rung(m.name, list(chosen), best.rmse, best.rmse_train))
         models[m.name] = (m, th)
-        cur_val, cur_e = best.rmse, y - m.simulate(th, t, u)
-        pool = [c.effect for c in ranked[1:] if c.significant or c.improvement >= 1.02]
-        while pool and len(chosen) < max_rungs:
+        cur_e = e
+        while len(chosen) < max_rungs:
+            cur_val = _rmse(cur_e[val])
+            if cur_val <= noise_margin * noise:
+                break
+            pool = [c.effect for c in ranked if c.effect not in chosen and c.improvement >= 1.02][:2]
             trial = []
             for nm in pool:
                 try:
-                    mm = compose(bm_full, chosen + [nm], cfg)
-                except EffectError:
+                    cm = dict(carry.get(nm, {}))
+                    cm.update({k: v for k, v in models[ladder[-1].model][0].unpack(
+                        models[ladder[-1].model][1]).items() if "." in k})
+                    prev_m, prev_th = models[ladder[-1].model]
+                    mm, tth, yh = refit(base_model, chosen + [nm], cfg, t, u, y, prev_m.split(prev_th)[0], cm, fit_,
+                                        two_stage=nm not in carry)
+                except (EffectError, FitError):
                     continue
-                th0 = mm.start(t, u, y, th_base)
-                _carry(th0, mm, models[ladder[-1].model])
-                _carry(th0, mm, fitted[nm])
-                try:
-                    tth, yh = _fit(mm, t, u, y, train, th0, fitter)
-                except FitError:
-                    continue
-                e = y - yh
-                trial.append((_rmse(e[val]), nm, mm, tth, e))
+                trial.append((_rmse((y - yh)[val]), nm, mm, tth, y - yh))
                 say(f"ladder {mm.name}: validation RMSE {fmt_len(trial[-1][0])}")
             if not trial:
                 break
             r, nm, mm, tth, e = min(trial, key=lambda x: x[0])
-            if not (cur_val / r >= min_factor and _paired_t(cur_e[val], e[val]) >= t_min
-                    and cur_val > noise_margin * noise):
+            if not (cur_val / r >= min_factor and _paired_t(cur_e[val], e[val]) >= t_min):
                 break
             chosen.append(nm)
             ladder.append(Rung(mm.name, list(chosen), r, _rmse(e[train])))
             models[mm.name] = (mm, tth)
-            cur_val, cur_e = r, e
-            pool.remove(nm)
+            cands[nm].significant = True
+            cur_e = e
+    # Best first: the ladder's effects in the order they were added, then the rest by validation RMSE.
+    ranked = [cands[nm] for nm in chosen] + sorted((c for c in cands.values() if c.effect not in chosen),
+                                                   key=lambda c: (not c.significant, c.rmse))
+    for c in ranked:
+        c.evidence = _explain(c, base, base_val)
     missing = chosen[0] if chosen else "none"
     if at_floor:
         expl = (f"the {base} model already predicts held-out data to {fmt_len(base_val)} RMS, at the sensor "
                 f"noise floor ({fmt_len(noise)}): no effect is missing")
     elif not chosen:
         expl = (f"the {base} model leaves {fmt_len(base_val)} RMS (noise floor {fmt_len(noise)}), but no candidate "
-                f"effect predicts held-out data significantly better (needs ≥ {min_factor:g}× and paired t ≥ "
-                f"{t_min:g}); the remaining error is not one of: {', '.join(names)}")
+                f"predicts held-out data significantly better (needs ≥ {min_factor:g}× and paired t ≥ {t_min:g}); "
+                f"the remaining error is none of: {', '.join(names)}")
     else:
         expl = " → ".join(f"{r.model} {fmt_len(r.rmse)}" for r in ladder)
     return Diagnosis(base, base_val, base_tr, noise, ranked, missing, ladder, expl, n, dt,
                      time.perf_counter() - t0, models)
-
-
-def _carry(theta: np.ndarray, into: ComposedModel, source) -> None:
-    """Copy same-named effect parameters of an earlier fit into ``theta`` (warm start), in place."""
-    m, th = source
-    if th is None:
-        return
-    vals = {k: v for k, v in m.unpack(th).items() if "." in k}
-    names = into.names
-    for k, v in vals.items():
-        if k in names:
-            theta[names.index(k)] = v
 
 
 def _explain(c: Candidate, base: str, base_val: float) -> str:

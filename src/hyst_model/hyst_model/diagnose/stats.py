@@ -42,7 +42,7 @@ from scipy import stats as _sps
 __all__ = [
     "Fit", "Segment", "SegmentFit", "Band", "Correlation", "CompareStats",
     "fit_figures", "noise_sigma", "segment_input", "fit_by_segment", "fit_by_branch", "fit_by_level",
-    "fit_by_band", "loop_orientation", "autocorr", "crosscorr", "higher_order_tests", "auto_lag_step", "compare_stats",
+    "fit_by_band", "loop_orientation", "harmonics", "ringing", "autocorr", "crosscorr", "higher_order_tests", "auto_lag_step", "compare_stats",
     "z_value",
 ]
 
@@ -202,9 +202,12 @@ def _split_by_period(u: np.ndarray, a: int, b: int, fs: float, tol: float) -> li
     mid = 0.5 * (np.max(x) + np.min(x))
     s = np.signbit(x - mid)
     cross = np.flatnonzero(s[1:] != s[:-1]) + 1  # sample index (relative) after each crossing
-    if cross.size < 5:  # fewer than two full cycles: no frequency to speak of
+    if cross.size < 4:  # fewer than 1.5 cycles: no frequency to speak of
         return [Segment("motion", a, b, level=float(np.mean(x)))]
-    half = np.diff(cross).astype(float)
+    # Sub-sample crossing times (linear interpolation) for the frequency estimate.
+    xa, xb = x[cross - 1] - mid, x[cross] - mid
+    frac = np.where(xb != xa, xa / (xa - xb), 0.5)
+    half = np.diff(cross - 1 + frac)
     # Group consecutive half-periods whose length stays within tol of the running group median.
     groups: list[list[int]] = [[0]]
     for i in range(1, half.size):
@@ -220,7 +223,7 @@ def _split_by_period(u: np.ndarray, a: int, b: int, fs: float, tol: float) -> li
         g0, g1 = g[0], g[-1]
         seg_a = a + int(cross[g0])
         seg_b = a + int(cross[g1 + 1])
-        if len(g) >= 4:  # at least two full periods
+        if len(g) >= 3:  # at least 1.5 periods
             if seg_a > cursor:
                 out.append(Segment("motion", cursor, seg_a, level=float(np.mean(u[cursor:seg_a]))))
             freq = fs / (2.0 * float(np.mean(half[g])))
@@ -321,6 +324,8 @@ def fit_by_branch(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, tol: float | N
     if tol is None:
         tol = max(6.0 * np.sqrt(2.0) * noise_sigma(u), 1e-12 * float(np.ptp(u)) if u.size else 0.0)
     du = np.diff(u, prepend=u[:1])
+    if du.size > 1:
+        du[0] = du[1]  # the first sample has no predecessor: give it its neighbour's direction
     masks = {"rising": du > tol, "falling": du < -tol, "hold": np.abs(du) <= tol}
     return {k: fit_figures(np.asarray(y)[m], np.asarray(yhat)[m]) for k, m in masks.items()}
 
@@ -394,6 +399,57 @@ def fit_by_band(y: np.ndarray, yhat: np.ndarray, fs: float, edges: np.ndarray | 
         out.append(Band(float(lo), float(min(hi, fs / 2.0)), r, yr,
                         100.0 * (1.0 - r / yr) if yr > 0 else float("nan")))
     return out
+
+
+def harmonics(t: np.ndarray, e: np.ndarray, freq: float, n_harm: int = 10) -> tuple[np.ndarray, float]:
+    """Amplitudes of the residual at ``k·freq`` (k = 1..n_harm, least squares) and the share of its variance.
+
+    A residual that repeats with a periodic drive is a loop-shape error, not noise: odd harmonics come from a
+    symmetric shape error, even harmonics from an asymmetric one.
+    """
+    t = _as_1d("t", t)
+    e = _as_1d("e", e)
+    ec = e - e.mean()
+    fs = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    ks = [k for k in range(1, n_harm + 1) if k * freq < 0.45 * fs]
+    if not ks or ec.size < 4 * len(ks) + 1:
+        return np.zeros(0), 0.0
+    tt = t - t[0]
+    X = np.column_stack([f(2 * np.pi * k * freq * tt) for k in ks for f in (np.cos, np.sin)])
+    coef, *_ = np.linalg.lstsq(X, ec, rcond=None)
+    amp = np.hypot(coef[0::2], coef[1::2])
+    fitted = X @ coef
+    var = float(ec @ ec)
+    return amp, (float(fitted @ fitted) / var if var > 0 else 0.0)
+
+
+def ringing(t: np.ndarray, e: np.ndarray, noise: float, window_s: float = 0.05) -> tuple[float, float] | None:
+    """Oscillation of the residual right after a step: ``(frequency Hz, RMS m)`` or None.
+
+    The residual's first ``window_s`` seconds, minus a moving average over ~1 ms-scale trends, must carry an
+    RMS above 4× the output noise and a spectral peak 5× above the median — a resonance the model lacks.
+    """
+    t = _as_1d("t", t)
+    e = _as_1d("e", e)
+    if t.size < 16:
+        return None
+    dt = float(np.median(np.diff(t)))
+    n = int(min(e.size, max(16, round(window_s / dt))))
+    x = e[:n]
+    k = max(3, n // 16)
+    trend = np.convolve(np.pad(x, (k // 2, k - 1 - k // 2), mode="edge"), np.ones(k) / k, mode="valid")
+    d = x - trend
+    rms = float(np.sqrt(np.mean(d * d)))
+    if rms <= 4.0 * noise:
+        return None
+    spec = np.abs(np.fft.rfft(d * np.hanning(n)))
+    f = np.fft.rfftfreq(n, dt)
+    if spec.size < 4:
+        return None
+    i = int(np.argmax(spec[1:])) + 1
+    if spec[i] < 5.0 * float(np.median(spec[1:])):
+        return None
+    return float(f[i]), rms
 
 
 # ------------------------------------------------------------------------------------------------ correlation
@@ -649,7 +705,31 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
         bands=fit_by_band(y, yhat, fs, band_edges),
         auto=autocorr(e, max_lag, step, conf, dt), cross=crosscorr(e, u, max_lag, step, conf, dt),
         higher=higher_order_tests(e, u, max_lag, step, conf, dt), lag_step=step,
-        extra={"loop_orientation": loop_orientation(u, y)})
+        extra={"loop_orientation": loop_orientation(u, y), "harmonics": _harmonic_summary(t, u, e),
+               "ringing": _ringing_summary(t, u, e, noise_sigma(y))})
+
+
+def _harmonic_summary(t: np.ndarray, u: np.ndarray, e: np.ndarray) -> dict[str, Any] | None:
+    segs = [s for s in segment_input(t, u) if s.kind == "sine"]
+    if not segs:
+        return None
+    s = max(segs, key=lambda s: s.stop - s.start)
+    amp, share = harmonics(t[s.start:s.stop], e[s.start:s.stop], s.freq)
+    if amp.size == 0:
+        return None
+    return {"freq": s.freq, "t0": float(t[s.start]), "t1": float(t[s.stop - 1]), "amplitudes": amp.tolist(),
+            "share": share}
+
+
+def _ringing_summary(t: np.ndarray, u: np.ndarray, e: np.ndarray, noise: float) -> list[dict[str, float]]:
+    out = []
+    for s in segment_input(t, u):
+        if s.kind != "step":
+            continue
+        r = ringing(t[s.start:], e[s.start:], noise)
+        if r is not None:
+            out.append({"t": float(t[s.start]), "freq": r[0], "rms": r[1]})
+    return out
 
 
 def loop_orientation(u: np.ndarray, y: np.ndarray, n_levels: int = 8) -> int:

@@ -13,7 +13,7 @@ from ..errors import EffectError
 from ..model import Model
 from .base import ComposedModel, Effect
 
-__all__ = ["EFFECTS", "compose", "register", "effect_names"]
+__all__ = ["EFFECTS", "compose", "register", "effect_names", "Frozen"]
 
 #: name → Effect subclass. Filled by :func:`_load_builtins` at import and by :func:`register`.
 EFFECTS: dict[str, type[Effect]] = {}
@@ -103,3 +103,36 @@ def _load_builtins() -> None:
 
 
 _load_builtins()
+
+
+class Frozen(Effect):
+    """An effect with its parameters held fixed (it then has none to fit).
+
+    Used to refit the base model *around* an effect at its data-driven start: a base fitted without the effect
+    is distorted by it (e.g. its δ terms imitate a delay), and a joint refit from there can stall in that
+    basin. Fitting the base with the effect frozen first, then everything jointly, avoids that.
+    """
+
+    def __init__(self, effect: Effect, theta):
+        import numpy as np
+        super().__init__(getattr(effect, "_config", {}))
+        self.effect = effect
+        self.theta = np.asarray(theta, dtype=np.float64)
+        self.name = effect.name
+        self.kind = effect.kind
+        self.conflicts = effect.conflicts
+        self.bases = effect.bases
+        self.summary = effect.summary
+        self.physics = effect.physics
+
+    def params(self):
+        return ()
+
+    def config(self):
+        return self.effect.config()
+
+    def apply(self, theta, t, u, inner):
+        return self.effect.apply(self.theta, t, u, inner)
+
+    def check(self, base, others):
+        self.effect.check(base, others)

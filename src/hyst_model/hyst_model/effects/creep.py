@@ -17,7 +17,7 @@ input, with the record's own sample time (so decimated screening copies work unc
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import lfilter
+from numba import njit
 
 from ..model import Param
 from .base import Effect
@@ -30,15 +30,28 @@ PER_DECADE = 3
 TAUS = np.logspace(-2, np.log10(300.0), int(round(PER_DECADE * np.log10(300.0 / 0.01))) + 1)
 
 
+@njit(cache=True)
+def _lag_bank(x: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Σ_i w_i c_i for lags c_i ← a_i c_i + (1 − a_i) x_k, all at rest at x[0] (one pass, compiled)."""
+    n = x.shape[0]
+    m = a.shape[0]
+    c = np.full(m, x[0])
+    out = np.empty(n)
+    for k in range(n):
+        s = 0.0
+        xk = x[k]
+        for i in range(m):
+            c[i] = a[i] * c[i] + (1.0 - a[i]) * xk
+            s += w[i] * c[i]
+        out[k] = s
+    return out
+
+
 def creep_lags(t: np.ndarray, x: np.ndarray, taus: np.ndarray = TAUS) -> np.ndarray:
     """States c_i (shape (len(taus), n)) of first-order lags driven by ``x``, at rest at ``x[0]``."""
-    x = np.asarray(x, dtype=np.float64)
-    dt = sample_time(t)
-    out = np.empty((taus.size, x.size))
-    for i, tau in enumerate(taus):
-        a = np.exp(-dt / tau)
-        out[i], _ = lfilter([1.0 - a], [1.0, -a], x, zi=[a * x[0]])
-    return out
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    a = np.exp(-sample_time(t) / taus)
+    return np.vstack([_lag_bank(x, a[i:i + 1], np.ones(1)) for i in range(taus.size)])
 
 
 def _weights(tilt: float, taus: np.ndarray = TAUS) -> np.ndarray:
@@ -48,8 +61,9 @@ def _weights(tilt: float, taus: np.ndarray = TAUS) -> np.ndarray:
 
 def creep_term(t: np.ndarray, x: np.ndarray, tilt: float = 0.0) -> np.ndarray:
     """(n / PER_DECADE) · Σ w_i (x − c_i): the creep deficit per unit gain."""
-    c = creep_lags(t, x)
-    return (TAUS.size / PER_DECADE) * (x - _weights(tilt) @ c)
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    a = np.exp(-sample_time(t) / TAUS)
+    return (TAUS.size / PER_DECADE) * (x - _lag_bank(x, a, _weights(tilt)))
 
 
 class Creep(Effect):

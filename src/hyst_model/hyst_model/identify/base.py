@@ -62,6 +62,16 @@ class TrainProblem:
             J = np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
         return J
 
+    def residuals_jac(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Normalised residuals and their Jacobian from one sensitivity simulation (models with simulate_jac)."""
+        self.n_eval += 1
+        with np.errstate(all="ignore"):
+            yhat, J = self.model.simulate_jac(np.asarray(theta, dtype=np.float64), self.t, self.u)
+        r = (yhat[self.a:] - self.y) / self.scale
+        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
+            return np.full(self.y.size, np.inf), np.zeros((self.y.size, theta.size))
+        return r, J[self.a:] / self.scale
+
     def cost(self, theta: np.ndarray) -> float:
         """Training RMSE (m), inf for a diverging parameter set."""
         r = self.simulate(theta) - self.y

@@ -10,9 +10,10 @@ Given the measured output, MBW (3.21) is *linear* in (ζ1, ζ2, ψ1, ψ2, α1, �
 and δ1 enters linearly as well, so a grid over δ2 and a few offset guesses costs one small least-squares solve each (equation error, on a
 zero-phase low-passed y because differencing amplifies sensor noise). Every grid candidate is then simulated in
 free run at once (:func:`hyst_model.core.mbw.mbw_simulate_batch`) and the best few distinct ones start an
-output-error fit: :func:`scipy.optimize.least_squares` (trust-region reflective, bounded) of the free-run residual,
-with the exact Jacobian from forward sensitivities when the model offers ``simulate_jac`` (MBW/BW) and finite
-differences otherwise. δ1, δ2 and the offset are fitted too.
+output-error fit of the free-run residual within the parameter bounds: for models with an exact Jacobian
+(``simulate_jac``: MBW/BW forward sensitivities) a compact bounded Levenberg-Marquardt on the p × p normal equations
+(:mod:`.lm`), otherwise :func:`scipy.optimize.least_squares` (trust-region reflective, finite differences).
+δ1, δ2 and the offset are fitted too.
 
 Any model works: a composed model (``.base`` + effects) gets the equation-error start on its base (when the base
 is MBW/BW) and its declared defaults for the effect parameters; other models start from their defaults.
@@ -26,6 +27,7 @@ from scipy.signal import butter, sosfiltfilt
 from ..core.mbw import PARAM_NAMES, mbw_simulate_batch
 from ..model import MBWModel, Model
 from .base import Estimator, TrainProblem
+from .lm import _normal_equations, bounded_lm
 
 __all__ = ["FastFit", "equation_error_starts", "DELTA2_GRID"]
 
@@ -54,7 +56,7 @@ def _lowpass(u: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def equation_error_starts(base: MBWModel, u: np.ndarray, y: np.ndarray, a: int = 0,
                           delta2_grid: np.ndarray = DELTA2_GRID, n_offsets: int = 9, refine: int = 18,
-                          max_rows: int = 8000) -> tuple[np.ndarray, np.ndarray]:
+                          max_rows: int = 4000) -> tuple[np.ndarray, np.ndarray]:
     """Equation-error parameter sets for an MBW/BW model, one per δ2 of a grid, ranked by free-run RMSE.
 
     For each δ2 and output offset c, (3.21) is linear in (δ1, ζ1, ζ2, ψ1, ψ2, α1, α2) given the (low-passed)
@@ -102,10 +104,15 @@ def equation_error_starts(base: MBWModel, u: np.ndarray, y: np.ndarray, a: int =
         if not base.rate:
             cols = [cols[0], cols[1], cols[3], cols[5]]
         X = np.column_stack(cols)
-        sc = np.sqrt(np.mean(X * X, axis=0)) + 1e-300
-        w, *_ = np.linalg.lstsq(X / sc, yk, rcond=1e-12)
-        r = yk - (X / sc) @ w
-        return w / sc, float(r @ r)
+        G, b, yy = _normal_equations(X, yk)  # a 7x7 solve per candidate instead of an SVD
+        sc = np.sqrt(np.diag(G)) + 1e-300  # scale the columns to unit norm for conditioning
+        G = G / np.outer(sc, sc)
+        b = b / sc
+        try:
+            w = np.linalg.solve(G + 1e-12 * np.trace(G) * np.eye(G.shape[0]), b)
+        except np.linalg.LinAlgError:
+            return np.zeros(G.shape[0]), np.inf
+        return w / sc, float(yy - 2.0 * np.dot(w, b) + w @ G @ w)
 
     cands = []
     c_grid = np.linspace(c_lo - pad, c_hi + pad, n_offsets)
@@ -196,9 +203,11 @@ class FastFit(Estimator):
         return out
 
     def _run(self, problem: TrainProblem, x0: np.ndarray, nfev: int):
-        jac = problem.jac if problem.has_jac else "2-point"
+        if problem.has_jac:  # exact sensitivities: the compact normal-equation LM is ~10x cheaper per iteration
+            return bounded_lm(problem.residuals_jac, x0, problem.lower, problem.upper, max_iter=nfev)
         return least_squares(problem.residuals, x0, jac=jac, bounds=(problem.lower, problem.upper),
-                             method="trf", x_scale="jac", max_nfev=nfev, ftol=1e-10, xtol=1e-10, gtol=1e-10)
+                             method="trf", x_scale="jac", max_nfev=nfev, ftol=1e-10, xtol=1e-10, gtol=1e-10,
+                             tr_solver="lsmr")  # iterative trust-region solve: no n x p SVD per iteration
 
     def _solve(self, problem: TrainProblem):
         starts = self._starts(problem)

@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import DataError
 from .record import Record
 
-__all__ = ["UNITS", "parse_list", "read_csv", "write_csv"]
+__all__ = ["UNITS", "parse_list", "read_csv", "read_input_csv", "write_csv"]
 
 #: Accepted units per quantity and their factor to SI. The input may be a voltage (PEA), a driver current (GMA)
 #: or a force (the Bouc-Wen benchmark); it is never converted between those kinds.
@@ -34,13 +34,14 @@ UNITS: dict[str, dict[str, float]] = {
 _SI = {"t": "s", "u": "V", "y": "m"}
 
 
-def parse_list(text: str | Sequence[str] | None, what: str) -> tuple[str, ...] | None:
-    """``"a,b,c"`` → ``("a", "b", "c")``; checks there are exactly three entries."""
+def parse_list(text: str | Sequence[str] | None, what: str, quantities: str = "tuy") -> tuple[str, ...] | None:
+    """``"a,b,c"`` → ``("a", "b", "c")``; checks there is one entry per quantity (t,u,y by default)."""
     if text is None:
         return None
     items = tuple(s.strip() for s in (text.split(",") if isinstance(text, str) else text))
-    if len(items) != 3 or not all(items):
-        raise DataError(f"{what} needs three comma-separated entries for t,u,y (got {','.join(items)!r})")
+    if len(items) != len(quantities) or not all(items):
+        raise DataError(f"{what} needs {len(quantities)} comma-separated entries for {','.join(quantities)} "
+                        f"(got {','.join(items)!r})")
     return items
 
 
@@ -55,6 +56,36 @@ def _unit_factor(q: str, unit: str) -> float:
 def _suffix_unit(q: str, col: str) -> str:
     tail = col.rsplit("_", 1)[-1] if "_" in col else ""
     return tail if tail in UNITS[q] else _SI[q]
+
+
+def _read_columns(path: Path, columns: tuple[str, ...], units: tuple[str, ...] | None, quantities: str):
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise DataError(f"{path}: cannot read ({err})") from err
+    lines = text.splitlines()
+    if not lines or not lines[0].strip():
+        raise DataError(f"{path}: empty file (expected a header row such as {','.join(quantities)})")
+    header = [h.strip() for h in lines[0].split(",")]
+    missing = [c for c in columns if c not in header]
+    if missing:
+        hint = (" (name the columns with --columns and their units with --units)"
+                if tuple(columns) == tuple(quantities) else "")
+        raise DataError(f"{path}: column(s) {', '.join(missing)} not in the header {','.join(header)}{hint}")
+    us = units or tuple(_suffix_unit(q, c) for q, c in zip(quantities, columns))
+    factors = np.array([_unit_factor(q, un) for q, un in zip(quantities, us)])
+    idx = [header.index(c) for c in columns]
+    if len(lines) < 2 or not any(ln.strip() for ln in lines[1:]):
+        raise DataError(f"{path}: header only, no data rows")
+    try:
+        data = np.genfromtxt(io.StringIO(text), delimiter=",", skip_header=1, usecols=idx, dtype=np.float64,
+                             invalid_raise=True, encoding="utf-8-sig")
+    except ValueError as err:
+        raise DataError(f"{path}: malformed rows ({err})") from err
+    data = np.asarray(data, dtype=np.float64).reshape(-1, len(columns)) * factors
+    return data, list(us)
 
 
 def read_csv(path: str | Path, columns: Sequence[str] | str | None = None,
@@ -77,36 +108,26 @@ def read_csv(path: str | Path, columns: Sequence[str] | str | None = None,
     """
     path = Path(path)
     columns = parse_list(columns, "--columns") or ("t", "u", "y")
-    units_given = parse_list(units, "--units")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise DataError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise DataError(f"{path}: cannot read ({err})") from err
-    lines = text.splitlines()
-    if not lines or not lines[0].strip():
-        raise DataError(f"{path}: empty file (expected a header row such as t,u,y)")
-    header = [h.strip() for h in lines[0].split(",")]
-    missing = [c for c in columns if c not in header]
-    if missing:
-        hint = "" if columns != ("t", "u", "y") else " (name the columns with --columns and their units with --units)"
-        raise DataError(f"{path}: column(s) {', '.join(missing)} not in the header {','.join(header)}{hint}")
-    us = units_given or tuple(_suffix_unit(q, c) for q, c in zip("tuy", columns))
-    factors = [_unit_factor(q, un) for q, un in zip("tuy", us)]
-    idx = [header.index(c) for c in columns]
-    if len(lines) < 2:
-        raise DataError(f"{path}: header only, no data rows")
-    try:
-        data = np.genfromtxt(io.StringIO(text), delimiter=",", skip_header=1, usecols=idx, dtype=np.float64,
-                             invalid_raise=True, encoding="utf-8-sig")
-    except ValueError as err:
-        raise DataError(f"{path}: malformed rows ({err})") from err
-    data = np.atleast_2d(data)
-    if data.shape[1] != 3:
-        data = data.reshape(-1, 3)
-    meta = {"source": str(path), "format": "csv", "columns": list(columns), "units": list(us)}
-    return Record(data[:, 0] * factors[0], data[:, 1] * factors[1], data[:, 2] * factors[2], meta)
+    data, us = _read_columns(path, columns, parse_list(units, "--units"), "tuy")
+    meta = {"source": str(path), "format": "csv", "columns": list(columns), "units": us}
+    return Record(data[:, 0], data[:, 1], data[:, 2], meta)
+
+
+def read_input_csv(path: str | Path, columns: Sequence[str] | str | None = None,
+                   units: Sequence[str] | str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Read an input-only CSV (``t,u`` by default) and return ``(t, u)`` in s and V, checked finite and increasing."""
+    path = Path(path)
+    columns = parse_list(columns, "--columns", "tu") or ("t", "u")
+    data, _ = _read_columns(path, columns, parse_list(units, "--units", "tu"), "tu")
+    t, u = data[:, 0], data[:, 1]
+    bad = ~(np.isfinite(t) & np.isfinite(u))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise DataError(f"{path}: {int(bad.sum())} row(s) with NaN/inf values (first at data row {k})")
+    if t.size > 1 and np.any(np.diff(t) <= 0):
+        k = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise DataError(f"{path}: time not strictly increasing at data row {k + 1}")
+    return t, u
 
 
 def write_csv(path: str | Path, columns: Mapping[str, np.ndarray], *, force: bool = False,

@@ -1,0 +1,327 @@
+"""hyst_controller_node: DPPC / DMRAC / PID / open loop on ROS topics, switchable while running.
+
+Subscribes ``/stage/state`` (``position[0]`` m, ``effort[0]`` applied V) and ``/stage/reference``
+(``position[0]`` m, ``velocity[0]`` m/s); publishes ``/stage/command`` (``effort[0]`` V, ``header.stamp`` = the
+stamp of the state sample it answers), ``/controller/state`` (named scalars: error, epsilon, lambda, nu, estimates
+... in ``position``) and ``/diagnostics``.
+
+The command answering the state stamped t_k acts at the next sample, so the reference is evaluated at
+t_k + 1/rate: the newest reference sample is extrapolated with its rate from its own stamp (at most 50 ms; both
+stamps come from the same clock in realtime operation). Parameters: ``algorithm`` (bumpless switch at run time),
+per-algorithm gains ``dppc.*``, ``dmrac.*``, ``pid.*`` (ranges declared, consistency checked in the on-set
+callback), limits ``v_min``/``v_max``/``slew_max``/``v_safe``, ``watchdog_periods`` and the stage model
+``model.*`` (from ``--ros-args --params-file P``; the identification node may push new values at run time).
+Watchdog: no state for ``watchdog_periods``/``rate`` seconds → command ``v_safe`` (slew-limited), log, and
+ERROR on /diagnostics; the next state restarts the controller bumplessly.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, fields
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from hyst_model.core import PARAM_NAMES, MBWParams, pea_default
+
+from .base import hand_over
+from .dmrac import TABLE53, DMRACGains
+from .dppc import DPPCGains
+from .errors import ControlError
+from .limits import GMA_LIMITS, PEA_LIMITS, CommandLimits
+from .loop import ALGORITHMS, make_controller
+from .pid import PIDGains
+
+__all__ = ["ControllerNode", "ControllerSettings", "main"]
+
+_F = float
+# name: (default, lo, hi, description) for every gain; one table feeds declaration, validation and application.
+_GAINS = {
+    "dppc": (DPPCGains, {
+        "lambda0": (20e-6, 1e-9, 1e-3, "initial funnel half-width λ0 (m), Table 4.2: 20 µm"),
+        "lambda_inf": (0.4e-6, 1e-10, 1e-4, "final funnel half-width λ∞ (m), Table 4.2: 0.4 µm"),
+        "omega": (0.01, 1e-6, 0.999, "funnel decay per sample ω (4.7)"),
+        "chi": (0.1, 1e-3, 0.999, "error contraction χ (4.11); larger = gentler, more robust"),
+        "h_lower": (1.0, 0.01, 100.0, "lower funnel factor h̲ (4.8)"),
+        "h_upper": (1.0, 0.01, 100.0, "upper funnel factor h̄ (4.8)"),
+        "funnel_margin": (0.9, 0.1, 0.99, "out-of-funnel re-initialisation margin ρ"),
+        "ki": (0.0, 0.0, 0.99, "integral of the error on the target (beyond thesis; 0 = off)"),
+        "zeta0": (1e-3, 1e-9, 1.0, "lower bound on μ (Assumption 4.1)"),
+        "exact_rate": (True, None, None, "invert with the input rate (true) or the reference rate r_u (4.3)")}),
+    "dmrac": (DMRACGains, {
+        "kappa1": (0.01, 1e-6, 1.99, "adaptation gain κ1 of ζ1, ψ1, α1 (5.12)-(5.17)"),
+        "kappa2": (0.01, 0.0, 1.99, "adaptation gain κ2 of ζ2, ψ2, α2"),
+        "a_m": (0.1, -0.99, 0.99, "reference-model pole a_m (5.3) = closed-loop error pole"),
+        "zeta0": (1e-3, 1e-9, 1.0, "projection bound ζ0 (5.12b)"),
+        "varrho": (1e-4, 1e-9, 1.0, "projection margin ϱ (5.16b)"),
+        "theta_max": (10.0, 0.01, 1e3, "box on every estimate (model units)"),
+        "deadzone": (0.0, 0.0, 1e-6, "no adaptation below this estimation error (m)"),
+        "exact_rate": (True, None, None, "invert with the input rate (true) or r_u (5.4)")}),
+    "pid": (PIDGains, {
+        "kp": (1.0e6, 0.0, 1e9, "proportional gain (V/m)"),
+        "ki": (8.0e9, 0.0, 1e13, "integral gain (V/(m s))"),
+        "kd": (0.0, 0.0, 1e6, "derivative gain (V s/m)"),
+        "t_filter": (2e-3, 1e-6, 1.0, "derivative filter time constant (s)"),
+        "t_track": (5e-3, 1e-6, 10.0, "anti-windup back-calculation time constant (s)")}),
+}
+_MODEL_KEYS = PARAM_NAMES + ("offset", "u_scale", "y_scale")
+
+
+@dataclass(frozen=True)
+class ControllerSettings:
+    """Every node parameter as plain values; swapped as a whole on a parameter change."""
+
+    algorithm: str
+    rate: float
+    limits: CommandLimits
+    watchdog_periods: int
+    state_decimation: int
+    dppc: DPPCGains
+    dmrac: DMRACGains
+    dmrac_initial: str
+    pid: PIDGains
+    model: MBWParams
+
+    def gains(self, algorithm: str):
+        return getattr(self, algorithm) if algorithm in _GAINS else None
+
+
+def _fp(lo, hi):
+    return [FloatingPointRange(from_value=_F(lo), to_value=_F(hi), step=0.0)]
+
+
+class ControllerNode(Node):
+    """The controller node; see the module docstring."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("hyst_controller", **kwargs)
+        self._declare()
+        self._settings = self._read()  # start-up values were validated by _read
+        self._ctrl = None
+        self._y = math.nan
+        self._ref = None  # (t_stamp, r, rdot)
+        self._last_state_wall = None
+        self._tripped = False
+        self._n = dict.fromkeys(("states", "commands", "bad_states", "bad_refs", "watchdog_trips", "switches"), 0)
+        self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._after_set)
+        self._cmd_pub = self.create_publisher(JointState, "/stage/command", 10)
+        self._state_pub = self.create_publisher(JointState, "/controller/state", 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(JointState, "/stage/state", self._on_state, 10)
+        self.create_subscription(JointState, "/stage/reference", self._on_reference, 10)
+        self.create_timer(0.02, self._watchdog)
+        self.create_timer(1.0, self._diagnostics)
+        self.get_logger().info(f"controller ready: {self._settings.algorithm} at {self._settings.rate:g} Hz")
+
+    # Parameters -----------------------------------------------------------------------------------------
+    def _declare(self) -> None:
+        d = self.declare_parameter
+        d("profile", "pea", ParameterDescriptor(description="limit defaults: pea (0-150 V) | gma (+-5 V)",
+                                                read_only=True))
+        lim = GMA_LIMITS if self.get_parameter("profile").value == "gma" else PEA_LIMITS
+        d("algorithm", "dppc", ParameterDescriptor(description="dppc | dmrac | pid | open_loop (bumpless switch)"))
+        d("rate", 1000.0, ParameterDescriptor(description="expected state rate (Hz)", floating_point_range=_fp(1, 5000)))
+        for n, v, txt in (("v_min", lim.v_min, "lowest command (V)"), ("v_max", lim.v_max, "highest command (V)"),
+                          ("v_safe", lim.v_safe, "command held by the watchdog (V)")):
+            d(n, v, ParameterDescriptor(description=txt, floating_point_range=_fp(-200, 200)))
+        d("slew_max", lim.slew_max, ParameterDescriptor(description="command slew limit (V/s)",
+                                                        floating_point_range=_fp(1e-3, 1e9)))
+        d("watchdog_periods", 100, ParameterDescriptor(
+            description="no state for this many periods -> v_safe", integer_range=[IntegerRange(
+                from_value=2, to_value=1_000_000, step=1)]))
+        d("state_decimation", 10, ParameterDescriptor(
+            description="publish /controller/state every N samples", integer_range=[IntegerRange(
+                from_value=1, to_value=100_000, step=1)]))
+        for alg, (_, spec) in _GAINS.items():
+            for name, (default, lo, hi, txt) in spec.items():
+                desc = ParameterDescriptor(description=txt) if lo is None else \
+                    ParameterDescriptor(description=txt, floating_point_range=_fp(lo, hi))
+                d(f"{alg}.{name}", default, desc)
+        d("dmrac.initial", "model", ParameterDescriptor(description="initial estimates: model | cs0..cs3 (Table 5.3)"))
+        m = pea_default()
+        d("model.base", "mbw", ParameterDescriptor(description="base model of the params file (controllers need mbw)"))
+        for key in _MODEL_KEYS:
+            d(f"model.{key}", _F(getattr(m, key)), ParameterDescriptor(
+                description=f"stage model {key} (params file; thesis ν convention)",
+                floating_point_range=_fp(-1e6, 1e6)))
+
+    def _read(self, changes: dict | None = None) -> ControllerSettings:
+        """Settings from current parameters (+ pending ``changes``); raises ControlError/ValueError with a reason."""
+        def get(name):
+            return changes[name] if changes and name in changes else self.get_parameter(name).value
+
+        alg = str(get("algorithm"))
+        if alg not in ALGORITHMS:
+            raise ControlError(f"algorithm must be one of {', '.join(ALGORITHMS)}, got {alg!r}")
+        if str(get("model.base")) != "mbw":
+            raise ControlError("the controllers invert the MBW model: model.base must be 'mbw'")
+        init = str(get("dmrac.initial")).lower()
+        if init != "model" and init not in TABLE53:
+            raise ControlError("dmrac.initial must be model, cs0, cs1, cs2 or cs3")
+        gains = {a: cls(**{n: get(f"{a}.{n}") for n in spec}) for a, (cls, spec) in _GAINS.items()}
+        model = MBWParams(**{k: _F(get(f"model.{k}")) for k in _MODEL_KEYS})
+        s = ControllerSettings(
+            algorithm=alg, rate=_F(get("rate")),
+            limits=CommandLimits(_F(get("v_min")), _F(get("v_max")), _F(get("slew_max")), _F(get("v_safe"))),
+            watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
+            dmrac_initial=init, model=model, **gains)
+        make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init)  # checks the model too
+        return s
+
+    def _on_set(self, params) -> SetParametersResult:
+        try:
+            self._read({p.name: p.value for p in params})
+        except (ControlError, ValueError, TypeError) as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def _after_set(self, params) -> None:
+        old, new = self._settings, self._read()
+        self._settings = new
+        c = self._ctrl
+        if c is None:
+            return
+        if new.algorithm != old.algorithm or new.rate != old.rate or new.dmrac_initial != old.dmrac_initial:
+            self._switch(new)
+            return
+        c.limits = new.limits
+        if new.model != old.model and hasattr(c, "set_model"):
+            c.set_model(new.model)
+        if new.gains(new.algorithm) != old.gains(new.algorithm) and hasattr(c, "set_gains"):
+            c.set_gains(new.gains(new.algorithm))
+        self.get_logger().info("parameters applied: " + ", ".join(p.name for p in params))
+
+    def _switch(self, s: ControllerSettings) -> None:
+        new = make_controller(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial)
+        self._ctrl = hand_over(new, self._ctrl, self._y) if math.isfinite(self._y) else None
+        self._n["switches"] += 1
+        self.get_logger().info(f"switched to {s.algorithm} (bumpless)")
+
+    # Messages -------------------------------------------------------------------------------------------
+    def _on_reference(self, msg: JointState) -> None:
+        if not msg.position or not math.isfinite(msg.position[0]):
+            self._n["bad_refs"] += 1
+            return
+        v = msg.velocity[0] if msg.velocity and math.isfinite(msg.velocity[0]) else 0.0
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        self._ref = (t, _F(msg.position[0]), _F(v))
+
+    def _target(self, t_state: float, y: float) -> float:
+        if self._ref is None:
+            return self._ctrl.last_reference if self._ctrl is not None else y  # hold where the stage is
+        t_ref, r, v = self._ref
+        lead = t_state + 1.0 / self._settings.rate - t_ref
+        return r + v * lead if abs(lead) <= 0.05 else r
+
+    def _on_state(self, msg: JointState) -> None:
+        self._last_state_wall = time.monotonic()
+        self._n["states"] += 1
+        if not msg.position or not math.isfinite(msg.position[0]):
+            self._n["bad_states"] += 1
+            self.get_logger().warning("state without a finite position[0] ignored", throttle_duration_sec=1.0)
+            if self._ctrl is not None:
+                self._publish_command(msg.header.stamp, self._ctrl.last_command)  # answer: hold
+            return
+        y = _F(msg.position[0])
+        self._y = y
+        s = self._settings
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if self._ctrl is None or self._tripped:
+            u0 = _F(msg.effort[0]) if msg.effort and math.isfinite(msg.effort[0]) else s.limits.v_safe
+            c = make_controller(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial)
+            c.reset(y, u0, self._target(t, y) if self._ref is not None else y)
+            self._ctrl = c
+            if self._tripped:
+                self.get_logger().info("states are back: controller restarted bumplessly")
+            self._tripped = False
+        u = self._ctrl.step(self._target(t, y), y)
+        self._publish_command(msg.header.stamp, u)
+        if self._n["commands"] % s.state_decimation == 0:
+            st = self._ctrl.state()
+            out = JointState()
+            out.header.stamp = msg.header.stamp
+            out.name = list(st)
+            out.position = [_F(v) for v in st.values()]
+            self._state_pub.publish(out)
+
+    def _publish_command(self, stamp, u: float) -> None:
+        out = JointState()
+        out.header.stamp = stamp
+        out.name = ["stage"]
+        out.effort = [_F(u)]
+        self._cmd_pub.publish(out)
+        self._n["commands"] += 1
+
+    # Watchdog and diagnostics ---------------------------------------------------------------------------
+    def _watchdog(self) -> None:
+        s = self._settings
+        if self._last_state_wall is None or self._ctrl is None:
+            return
+        silent = time.monotonic() - self._last_state_wall
+        if silent < s.watchdog_periods / s.rate:
+            return
+        if not self._tripped:
+            self._tripped = True
+            self._n["watchdog_trips"] += 1
+            self.get_logger().error(f"no /stage/state for {silent:.3f} s: commanding v_safe = {s.limits.v_safe} V")
+        u = s.limits.apply(s.limits.v_safe, self._ctrl.last_command, 0.02)
+        self._ctrl._u_prev = u  # noqa: SLF001 - the watchdog owns the output while tripped
+        self._publish_command(self.get_clock().now().to_msg(), u)
+
+    def _diagnostics(self) -> None:
+        st = DiagnosticStatus(name="hyst_controller", hardware_id="stage")
+        if self._tripped:
+            st.level, st.message = DiagnosticStatus.ERROR, "watchdog: no /stage/state, holding v_safe"
+        elif self._ctrl is None:
+            st.level, st.message = DiagnosticStatus.WARN, "waiting for /stage/state"
+        else:
+            st.level, st.message = DiagnosticStatus.OK, f"{self._settings.algorithm} running"
+        vals = dict(self._n, algorithm=self._settings.algorithm)
+        if self._ctrl is not None:
+            vals.update(saturated=int(self._ctrl.state().get("saturated", 0)))
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self._diag_pub.publish(arr)
+
+    @property
+    def counts(self) -> dict:
+        return dict(self._n)
+
+
+def main(args=None) -> int:
+    """Console script ``hyst_controller_node`` (``--ros-args -p algorithm:=dmrac --params-file P``)."""
+    import sys
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = ControllerNode()
+        try:
+            from rclpy.experimental import EventsExecutor
+            executor = EventsExecutor()
+        except ImportError:  # pragma: no cover - older rclpy
+            executor = rclpy.executors.SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ControlError, ValueError) as err:
+        print(f"hyst_controller_node: {err}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,117 @@
+"""hyst_reference_node: publishes ``/stage/reference`` (``position[0]`` r in m, ``velocity[0]`` ṙ in m/s).
+
+Parameters: ``shape`` (step, ramp, step+ramp, sine, c1, c2, c3, case3, constant), ``amplitude`` (m),
+``frequency`` (Hz), ``offset`` (m), ``t0`` (s), ``rate`` (Hz), ``duration`` (s, 0 = forever; afterwards the last
+value is held). Time starts at the first publication and restarts when the shape changes. Every value is
+validated in the on-set callback (:class:`hyst_control.reference.Reference` checks it) and applied by swapping
+the frozen reference object.
+"""
+from __future__ import annotations
+
+import math
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from .errors import ControlError
+from .reference import SHAPES, Reference
+
+__all__ = ["ReferenceNode", "main"]
+
+
+def _fp(lo, hi):
+    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+
+
+class ReferenceNode(Node):
+    """Publishes a :class:`Reference` at ``rate``; see the module docstring."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("hyst_reference", **kwargs)
+        d = self.declare_parameter
+        d("shape", "sine", ParameterDescriptor(description=" | ".join(SHAPES)))
+        d("amplitude", 10e-6, ParameterDescriptor(description="amplitude (m)", floating_point_range=_fp(0, 1e-3)))
+        d("frequency", 1.0, ParameterDescriptor(description="frequency (Hz)", floating_point_range=_fp(0, 500)))
+        d("offset", 15e-6, ParameterDescriptor(description="offset / start level (m)",
+                                               floating_point_range=_fp(-1e-3, 1e-3)))
+        d("t0", 0.1, ParameterDescriptor(description="start of steps and ramps (s)", floating_point_range=_fp(0, 1e4)))
+        d("rate", 1000.0, ParameterDescriptor(description="publication rate (Hz)", floating_point_range=_fp(1, 5000)))
+        d("duration", 0.0, ParameterDescriptor(description="seconds to run, then hold (0 = forever)",
+                                               floating_point_range=_fp(0, 1e6)))
+        self._ref = self._build()
+        self._rate = float(self.get_parameter("rate").value)
+        self._duration = float(self.get_parameter("duration").value)
+        self._t_start = None
+        self._pub = self.create_publisher(JointState, "/stage/reference", 10)
+        self._timer = self.create_timer(1.0 / self._rate, self._tick)
+        self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._after_set)
+
+    def _build(self, changes: dict | None = None) -> Reference:
+        def get(n):
+            return changes[n] if changes and n in changes else self.get_parameter(n).value
+
+        return Reference(shape=str(get("shape")), amplitude=float(get("amplitude")),
+                         frequency=float(get("frequency")), offset=float(get("offset")), t0=float(get("t0")))
+
+    def _on_set(self, params) -> SetParametersResult:
+        try:
+            self._build({p.name: p.value for p in params})
+        except (ControlError, ValueError, TypeError) as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def _after_set(self, params) -> None:
+        old = self._ref
+        self._ref = self._build()
+        self._duration = float(self.get_parameter("duration").value)
+        if self._ref.shape != old.shape:
+            self._t_start = None  # a new trajectory starts at its own t = 0
+        rate = float(self.get_parameter("rate").value)
+        if rate != self._rate:
+            self._rate = rate
+            self.destroy_timer(self._timer)
+            self._timer = self.create_timer(1.0 / rate, self._tick)
+
+    def _tick(self) -> None:
+        now = self.get_clock().now()
+        t_ns = now.nanoseconds
+        if self._t_start is None:
+            self._t_start = t_ns
+        t = (t_ns - self._t_start) * 1e-9
+        hold = self._duration > 0 and t > self._duration
+        r, v = self._ref.sample(min(t, self._duration) if hold else t)
+        msg = JointState()
+        msg.header.stamp = now.to_msg()
+        msg.name = ["stage"]
+        msg.position = [float(r)]
+        msg.velocity = [0.0 if hold or not math.isfinite(v) else float(v)]
+        self._pub.publish(msg)
+
+
+def main(args=None) -> int:
+    """Console script ``hyst_reference_node`` (``--ros-args -p shape:=sine -p frequency:=5.0``)."""
+    import sys
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = ReferenceNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ControlError, ValueError) as err:
+        print(f"hyst_reference_node: {err}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

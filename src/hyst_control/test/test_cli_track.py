@@ -1,0 +1,29 @@
+"""``hyst track`` through the real dispatcher: JSON metrics, and one-line errors with exit code 2."""
+import json
+
+import pytest
+
+from hyst_model.cli.main import main
+
+
+def test_track_json_reports_rmse_and_mae_in_metres(capsys):
+    assert main(["track", "--algorithm", "dppc", "--reference", "sine:10", "--seconds", "0.3", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["algorithm"] == "dppc" and out["samples"] == 600
+    assert 1e-10 < out["rmse"] < 20e-9 and out["rmse"] <= out["mae"] < 100e-9  # noise-limited, in metres
+
+
+def test_track_pid_is_worse_than_dppc_at_30_hz(capsys):
+    res = {}
+    for alg in ("pid", "dppc"):
+        main(["track", "--algorithm", alg, "--reference", "sine:30", "--seconds", "0.3", "--json"])
+        res[alg] = json.loads(capsys.readouterr().out)["rmse"]
+    assert res["pid"] > 10 * res["dppc"]
+
+
+@pytest.mark.parametrize("argv", [["track", "--reference", "sine"], ["track", "--seconds", "-1"],
+                                  ["track", "--mismatch", "3"], ["track", "--algorithm", "dmrac", "--initial", "x"]])
+def test_bad_input_is_one_line_and_exit_2(argv, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("hyst track: error:") and "Traceback" not in "".join(err)

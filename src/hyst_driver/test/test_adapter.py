@@ -1,0 +1,70 @@
+"""Adapters: SI scaling, event classification, GCS reply pairing and desynchronisation recovery."""
+from __future__ import annotations
+
+import pytest
+
+from hyst_driver import protocol_ascii as hdb
+from hyst_driver.adapter import (AsciiAdapter, BadFrame, DeviceFault, GcsAdapter, Identified, Reading,
+                                 make_adapter)
+from hyst_driver.errors import ConfigError
+
+
+def test_ascii_scales_counts_and_microvolts_to_si():
+    ad = AsciiAdapter(counts_to_m=2e-9)
+    ev = ad.feed(hdb.encode_sample(hdb.Sample(1, 1000, 7500, 75_000_000)))
+    assert ev == [Reading(7500 * 2e-9, 75.0, 1)]
+    assert ad.set_voltage(75.0) == b"$SV,75000000*A5\r\n"
+    assert ad.poll() == b"" and ad.streaming
+
+
+def test_ascii_events_split_across_reads_and_bad_frames_counted():
+    ad = AsciiAdapter(2e-9, v_plausible=(-15.0, 165.0))
+    stream = (hdb.encode_identity(hdb.Identity("a", "b", "c", "d")) + b"\x00\xffjunk\n"
+              + hdb.encode_sample(hdb.Sample(5, 0, 1, 1_000_000)).replace(b"*", b"*0")  # syntax
+              + b"$P,6,0,1,1000000*00\r\n"                                              # checksum
+              + hdb.encode_sample(hdb.Sample(9, 0, -3, 170_000_000))                    # implausible
+              + hdb.encode_error(5) + hdb.encode_error(3)
+              + hdb.encode_sample(hdb.Sample(7, 0, 2, 2_000_000))
+              + hdb.encode_sample(hdb.Sample(10, 0, 2, 2_000_000)))
+    events = []
+    for i in range(0, len(stream), 7):  # arbitrary chunking must not matter
+        events += ad.feed(stream[i:i + 7])
+    kinds = [e.kind if isinstance(e, BadFrame) else type(e).__name__ for e in events]
+    assert kinds == ["Identified", "garbage", "syntax", "syntax", "checksum", "implausible", "DeviceFault", "DeviceFault",
+                     "Reading", "Reading"]
+    assert events[6] == DeviceFault(5, hdb.ERROR_CODES[5], severe=True) and not events[7].severe
+    assert ad.lost_samples == 2  # 7 -> 10
+    ad.reset()
+    assert ad.feed(hdb.encode_sample(hdb.Sample(100, 0, 0, 0)))[0].seq == 100 and ad.lost_samples == 2
+
+
+def test_gcs_pairs_replies_in_query_order():
+    ad = GcsAdapter(v_plausible=(-15.0, 165.0))
+    assert ad.identify() == b"*IDN?\n"
+    assert ad.read_once() == b"POS? 1\nVOL? 1\n"
+    ev = ad.feed(b"hyst,GCS-EMU,1,1\n1=15.0020\n1=75.000000\n")
+    assert ev == [Identified("hyst,GCS-EMU,1,1"), Reading(pytest.approx(15.002e-6), 75.0, None)]
+    assert not ad.busy
+    ad.poll()
+    assert ad.error_query() == b"ERR?\n"
+    ev = ad.feed(b"1=1.0\n1=2.0\n1000\n")
+    assert isinstance(ev[0], Reading) and ev[1] == DeviceFault(1000, "amplifier fault (overload or over-temperature)", True)
+
+
+def test_gcs_bad_line_drops_the_exchange_instead_of_mispairing():
+    ad = GcsAdapter(v_plausible=(-15.0, 165.0))
+    ad.poll()
+    ev = ad.feed(b"1=12.31=75.0\n1=75.0\n")  # spliced partial POS? reply, then VOL? reply
+    assert [e.kind for e in ev] == ["syntax", "unexpected"]
+    ad.poll()
+    assert ad.feed(b"1=10.0\n1=500.0\n") == [BadFrame("implausible", "applied voltage 500.0 V")]
+    ad.poll()  # a late reply of an abandoned exchange is never paired with the new one
+    assert len(ad.feed(b"1=10.0\n1=20.0\n")) == 1
+
+
+def test_make_adapter():
+    assert make_adapter("gcs").name == "gcs" and make_adapter("ascii", 1e-9).counts_to_m == 1e-9
+    with pytest.raises(ConfigError):
+        make_adapter("scpi")
+    with pytest.raises(ConfigError):
+        AsciiAdapter(counts_to_m=0.0)

@@ -1,0 +1,181 @@
+"""The driver node: parameters (declared ranges, on-set validation), and a node process under injected faults."""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+
+from hyst_driver.emulator import FAULTS, PtyEmulator, build_device
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture
+def ctx():
+    c = rclpy.Context()
+    rclpy.init(context=c)
+    yield c
+    rclpy.try_shutdown(context=c)
+
+
+@pytest.fixture
+def emu():
+    e = PtyEmulator(build_device("pea", 1000.0)).start()
+    yield e
+    e.stop()
+
+
+def _spin(node, ex, seconds: float) -> None:
+    t_end = time.monotonic() + seconds
+    while time.monotonic() < t_end:
+        ex.spin_once(timeout_sec=0.01)
+
+
+def test_parameters_declared_with_ranges_and_validated_on_set(ctx, emu):
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hyst_driver.driver_node import DriverNode
+
+    node = DriverNode(context=ctx, parameter_overrides=[Parameter("port", value=emu.link)])
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        d = node.describe_parameter("v_max")
+        assert d.floating_point_range[0].from_value == 0.0 and d.floating_point_range[0].to_value == 150.0
+        assert node.describe_parameter("profile").read_only
+        bad = {
+            "v_max": 200.0,             # outside the declared range
+            "v_safe": 151.0,
+            "rate": 5000.0,
+            "port": "/dev/other",       # needs a restart
+            "protocol": "gcs",
+        }
+        for name, value in bad.items():
+            r = node.set_parameters([Parameter(name, value=value)])[0]
+            assert not r.successful and r.reason, name
+        r = node.set_parameters_atomically([Parameter("v_min", value=100.0), Parameter("v_max", value=50.0)])
+        assert not r.successful and "v_min" in r.reason and node.cfg.v_min == 0.0
+        r = node.set_parameters_atomically([Parameter("v_max", value=100.0), Parameter("slew_max", value=5e4)])
+        assert r.successful and node.cfg.v_max == 100.0 and node.cfg.slew_max == 5e4
+        r = node.set_parameters([Parameter("v_safe", value=140.0)])[0]  # now outside [v_min, v_max]
+        assert not r.successful and "v_safe" in r.reason and node.cfg.v_safe == 0.0
+        _spin(node, ex, 0.3)
+        assert node.link.limiter.limits.v_max == 100.0  # swapped into the running link
+        assert node.link.health.state == "running"
+    finally:
+        node.stop_io()
+        node.link.close()
+        node.destroy_node()
+
+
+def _node_cmd(*ros_args: str) -> list[str]:
+    return [sys.executable, "-c", "import sys; from hyst_driver.driver_node import main; sys.exit(main())",
+            "--ros-args", *ros_args]
+
+
+def test_bad_startup_parameters_give_one_line_and_exit_2():
+    r = subprocess.run(_node_cmd("-p", "port:=''"), capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "port" in r.stderr and "Traceback" not in r.stderr
+    r = subprocess.run(_node_cmd("-p", "port:=/dev/null", "-p", "v_min:=100.0", "-p", "v_max:=50.0"),
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "v_min" in r.stderr and "Traceback" not in r.stderr
+
+
+class _Probe:
+    """Test-side ROS endpoints: hostile command publisher, state and diagnostics listeners."""
+
+    def __init__(self, ctx) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.node = rclpy.create_node("probe", context=ctx)
+        self.ex = SingleThreadedExecutor(context=ctx)
+        self.ex.add_node(self.node)
+        self.states: list[JointState] = []
+        self.diag: list[dict] = []
+        self.node.create_subscription(JointState, "/stage/state", self._state, 100)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._diag, 10)
+        self.pub = self.node.create_publisher(JointState, "/stage/command", 100)
+        self.k = 0
+
+    def _state(self, msg: JointState) -> None:
+        self.states.append(msg)
+        self.k += 1
+        cmd = JointState()
+        cmd.header.stamp = msg.header.stamp
+        if self.k % 50 == 0:
+            cmd.effort = []                     # malformed: must be counted, never fatal
+        else:
+            specials = [math.nan, math.inf, -math.inf, 1e300, 500.0, -80.0]
+            cmd.effort = [specials[self.k % 6] if self.k % 7 == 0 else 60.0 + 70.0 * math.sin(self.k / 50.0)]
+        self.pub.publish(cmd)
+
+    def _diag(self, msg: DiagnosticArray) -> None:
+        s = msg.status[0]
+        d = {kv.key: kv.value for kv in s.values}
+        d["level"], d["message"] = int.from_bytes(s.level, "little") if isinstance(s.level, bytes) else s.level, \
+            s.message
+        self.diag.append(d)
+
+    def spin(self, seconds: float) -> None:
+        t_end = time.monotonic() + seconds
+        while time.monotonic() < t_end:
+            self.ex.spin_once(timeout_sec=0.005)
+
+    def wait_diag(self, pred, timeout: float) -> dict | None:
+        t_end = time.monotonic() + timeout
+        while time.monotonic() < t_end:
+            n = len(self.diag)
+            self.spin(0.05)
+            if len(self.diag) > n and pred(self.diag[-1]):
+                return self.diag[-1]
+        return None
+
+
+@pytest.mark.slow
+def test_node_survives_every_fault_class_and_ramps_to_safe_on_sigint(ctx, emu):
+    runs = 5
+    proc = subprocess.Popen(_node_cmd("-p", f"port:={emu.link}", "-p", "v_min:=10.0", "-p", "v_max:=120.0",
+                                      "-p", "slew_max:=20000.0", "-p", "v_safe:=20.0", "-p", "link_timeout:=0.2",
+                                      "-p", "command_timeout:=0.05"),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    probe = _Probe(ctx)
+    try:
+        assert probe.wait_diag(lambda d: d["state"] == "running", 20.0), proc.poll()
+        for fault in FAULTS:
+            for _ in range(runs):
+                emu.inject(fault, 0.05 if fault == "timeout" else 0.03)
+                probe.spin(0.12)
+            assert proc.poll() is None, f"node died after {fault}"
+        n_before = len(probe.states)
+        d = probe.wait_diag(lambda d: d["state"] == "running", 5.0)
+        assert d is not None
+        probe.spin(0.3)
+        assert len(probe.states) > n_before + 100  # samples flow again after the faults
+        last = probe.wait_diag(lambda d: True, 3.0)
+        c = {k: int(last[k]) for k in ("bad_frames", "device_errors", "timeouts", "disconnects", "connects",
+                                        "rejected", "clipped", "bad_commands")}
+        assert c["bad_frames"] >= runs and c["device_errors"] >= runs and c["timeouts"] >= runs, c
+        assert c["disconnects"] >= runs and c["connects"] >= runs + 1, c
+        assert c["rejected"] > 0 and c["clipped"] > 0 and c["bad_commands"] > 0, c
+        assert any(d["level"] != 0 for d in probe.diag), "faults never showed as WARN/ERROR"
+        assert all(10.0 <= s.effort[0] <= 120.0 for s in probe.states[-100:])
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+        probe.node.destroy_node()
+    assert proc.returncode == 0, err
+    assert "ramped to v_safe = 20.0 V" in err
+    time.sleep(0.05)
+    rx = emu.device.received
+    assert rx[-1] == 20.0
+    assert 10.0 <= min(rx) and max(rx) <= 120.0
+    assert max(abs(b - a) for a, b in zip(rx, rx[1:])) <= 20.0 + 1e-6

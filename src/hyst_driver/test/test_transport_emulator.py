@@ -1,0 +1,128 @@
+"""Transport (loop://, pty, backoff) and the emulator's protocol engine, byte for byte."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import serial
+
+from hyst_driver import protocol_ascii as hdb
+from hyst_driver.emulator import EmulatedDevice, FaultRates, PtyEmulator, build_device
+from hyst_driver.errors import LinkError
+from hyst_driver.transport import SerialTransport
+
+
+def test_loop_url_round_trip():
+    t = SerialTransport("loop://")
+    assert t.try_open(0.0) and t.is_open and t.fileno() is None
+    t.write(hdb.encode_identify())
+    time.sleep(0.01)
+    assert t.read() == b"$ID*3D\r\n"
+    t.close()
+    with pytest.raises(LinkError):
+        t.read()
+
+
+def test_open_failures_back_off_exponentially():
+    calls = []
+
+    def opener(url, **kw):
+        calls.append(url)
+        if len(calls) < 5:
+            raise serial.SerialException("no such device")
+        return serial.serial_for_url("loop://", **kw)
+
+    t = SerialTransport("/dev/ttyNOPE", opener=opener, backoff=(0.1, 0.4))
+    times = [0.0, 0.05, 0.1, 0.25, 0.3, 0.5, 0.85, 0.9]
+    opened = [t.try_open(now) for now in times]
+    # attempts at 0.0 (fail, wait 0.1), 0.1 (fail, 0.2), 0.3 (fail, 0.4), 0.85 (fail, 0.4), 1.25: 5th succeeds
+    assert opened == [False] * 8 and len(calls) == 4
+    assert "no such device" in t.last_error
+    assert t.try_open(1.3) and len(calls) == 5
+
+
+def test_vanished_pty_raises_link_error():
+    with PtyEmulator(build_device("pea", 1000.0)) as emu:
+        t = SerialTransport(emu.link)
+        assert t.try_open(0.0)
+        emu.inject("unplug", 0.5)
+        with pytest.raises(LinkError):
+            for _ in range(200):
+                t.read()
+                t.write(b"$RP*91\r\n")
+                time.sleep(0.005)
+        assert not t.is_open and not os.path.exists(emu.link)
+        assert not SerialTransport(emu.link).try_open(0.0)  # the path is gone while unplugged
+        time.sleep(0.6)
+        assert os.path.exists(emu.link) and SerialTransport(emu.link).try_open(0.0)  # back at the same path
+
+
+@pytest.fixture(scope="module")
+def dev():
+    return build_device("pea", 1000.0)
+
+
+def test_emulated_device_hdb_replies_byte_for_byte(dev):
+    dev = EmulatedDevice(dev.plant)
+    assert dev.handle(b"$ID*3D") == b"$ID,hyst,HDB-EMU,0001,1.0*10\r\n"
+    assert dev.handle(b"$SV,75000000*A5") == b"" and dev.v_set == 75.0 and dev.received == [75.0]
+    assert dev.handle(b"$SV,-2500000*B2") == hdb.encode_error(4) and dev.v_set == 75.0
+    assert dev.handle(b"$SV,75000000*A6") == hdb.encode_error(1)
+    assert dev.handle(b"$ST,1000*79") == b"$OK,ST,1000*83\r\n"
+    s1, s2 = hdb.decode_reply(dev.tick()), hdb.decode_reply(dev.tick())
+    assert s2.seq == s1.seq + 1 and s2.t_us - s1.t_us == 1000 and s2.uv == 75_000_000
+    assert s2.counts == round(dev.y / 2e-9) and 10e-6 < s2.counts * 2e-9 < 20e-6  # 75 V: mid stroke
+    assert dev.handle(b"$SP*84") == b"$OK,SP*D4\r\n" and dev.tick() == b""
+
+
+def test_emulated_device_gcs_replies(dev):
+    dev = EmulatedDevice(dev.plant)
+    assert dev.handle(b"*IDN?") == b"hyst,GCS-EMU,0001,1.0\n"
+    assert dev.handle(b"SVA 1 200.0") == b"" and dev.handle(b"ERR?") == b"17\n" and dev.handle(b"ERR?") == b"0\n"
+    assert dev.handle(b"XYZ") == b"" and dev.handle(b"ERR?") == b"2\n"
+    dev.handle(b"SVA 1 30.5")
+    dev.tick()
+    assert dev.handle(b"VOL? 1") == b"1=30.500000\n"
+    assert dev.handle(b"POS? 1") == f"1={dev.y * 1e6:.4f}\n".encode()
+
+
+def test_fault_rates_parse():
+    assert FaultRates.parse("garbage=0.01, unplug=1e-5").unplug == 1e-5
+    for bad in ("bogus=0.1", "garbage=2", "garbage=x"):
+        with pytest.raises(ValueError):
+            FaultRates.parse(bad)
+
+
+def _emulator_cmd(*args):
+    return [sys.executable, "-c", "import sys; from hyst_driver.emulator import main; sys.exit(main())", *args]
+
+
+def test_cli_bad_input_is_one_line_and_exit_2():
+    r = subprocess.run(_emulator_cmd("--faults", "bogus=1"), capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0 and "unknown fault" in r.stderr
+
+
+@pytest.mark.slow
+def test_cli_prints_port_serves_and_cleans_up(tmp_path):
+    link = tmp_path / "stage"
+    p = subprocess.Popen(_emulator_cmd("--link", str(link), "--profile", "gma"), stdout=subprocess.PIPE, text=True)
+    try:
+        first = p.stdout.readline()
+        assert str(link) in first and "gma" in first
+        t = SerialTransport(str(link))
+        assert t.try_open(0.0)
+        t.write(b"$RP*91\r\n")
+        deadline, data = time.monotonic() + 2.0, b""
+        while b"\n" not in data and time.monotonic() < deadline:
+            data += t.read()
+            time.sleep(0.005)
+        assert hdb.decode_reply(data).uv == 0  # GMA rests at 0 V
+        t.close()
+    finally:
+        p.send_signal(signal.SIGTERM)
+        p.wait(10)
+    assert p.returncode == 0 and not os.path.lexists(link)

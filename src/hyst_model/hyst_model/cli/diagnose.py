@@ -1,0 +1,109 @@
+"""``hyst diagnose DATA``: which physical effect is the model missing?
+
+Fits the base model, tests every effect of :data:`hyst_model.effects.EFFECTS` (plus those of ``--effect-module``
+files) by its residual signature and by a refit with held-out validation, and prints the ranking, the evidence
+in words, the error ladder and the verdict (see :mod:`hyst_model.diagnose.diagnose`). ``--json`` prints exactly
+one JSON object; ``--report DIR`` writes the HTML report of :mod:`hyst_model.diagnose.report`.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "diagnose", help="name the physical effect the model is missing (creep, delay, drift, ...)",
+        description="Fit the base model, test each effect by its residual signature and a validated refit, "
+                    "rank them and name the missing one ('none' when the residual is at the noise floor).")
+    p.add_argument("data", metavar="DATA", help="rosbag2 directory / .mcap file (/stage/state) or CSV file")
+    p.add_argument("--base", default="mbw", choices=("mbw", "bw"), help="base model (default mbw)")
+    p.add_argument("--effects", default="", help="only test these effects (comma-separated; default all)")
+    p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
+                   help="Python file defining extra Effect classes (repeatable)")
+    p.add_argument("--report", metavar="DIR", help="write an HTML report with plots into DIR")
+    p.add_argument("--force", action="store_true", help="allow --report to replace an existing report")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    p.add_argument("--quiet", action="store_true", help="no progress display on stderr")
+    from .fit import add_data_options
+    add_data_options(p)
+    p.set_defaults(func=run)
+
+
+def _clean(o):
+    if isinstance(o, dict):
+        return {str(k): _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    if isinstance(o, bool):
+        return o
+    if isinstance(o, float) or hasattr(o, "dtype"):
+        v = float(o)
+        return v if math.isfinite(v) else None
+    return o
+
+
+def _text(d, source: str) -> str:
+    from ..effects.signals import fmt_len
+    lines = [f"hyst diagnose: {source} ({d.n_samples} samples at {1.0 / d.dt:.6g} Hz, {d.seconds:.1f} s)",
+             f"baseline {d.base}: validation RMSE {fmt_len(d.baseline_rmse)} "
+             f"(training {fmt_len(d.baseline_rmse_train)}); sensor noise floor ≈ {fmt_len(d.noise)}",
+             "candidates, best first:"]
+    for c in d.candidates:
+        mark = "*" if c.significant else " "
+        lines.append(f" {mark} {c.effect:<11} validation RMSE {fmt_len(c.rmse):>10}  {c.improvement:7.2f}×  "
+                     f"residual test {c.score:.2f}")
+        lines.append(f"      {c.evidence}")
+    lines.append("error ladder: " + " → ".join(f"{r.model} {fmt_len(r.rmse)}" for r in d.ladder))
+    lines.append(f"missing effect: {d.missing}")
+    lines.append(d.explanation)
+    if d.missing != "none":
+        eff = ",".join(d.ladder[-1].effects)
+        lines.append(f"next: hyst fit DATA --model {d.base} --effects {eff} --out params.yaml")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point; returns the exit code (errors raise HystError → exit 2 in the dispatcher)."""
+    from ..diagnose.diagnose import diagnose
+    from ..effects import load_effect_module
+    from ..errors import EffectError
+    from .fit import load_checked
+
+    for path in args.effect_module:
+        load_effect_module(path)
+    names = [s.strip() for s in args.effects.split(",") if s.strip()] or None
+    if names and len(set(names)) != len(names):
+        raise EffectError("--effects lists an effect twice")
+    rec = load_checked(args)
+    d = diagnose(rec.t, rec.u, rec.y, base=args.base, effects=names, progress=not args.quiet)
+    report_path = None
+    if args.report:
+        try:
+            from ..diagnose import report as _report
+        except ImportError:
+            print("hyst diagnose: note: the HTML report module is not available; no report written",
+                  file=sys.stderr)
+        else:
+            from .compare import compare_record
+            model, theta = d.models[d.base]
+            rec2, yhat, st = compare_record(rec, model, theta)
+            out = _report.write_report(args.report, rec2, yhat, st,
+                                       ladder=[_clean(r.__dict__) for r in d.ladder],
+                                       diagnosis=_clean(d.to_json()), force=args.force,
+                                       title=f"hyst diagnose: {rec.source} (plots: base model {d.base})")
+            report_path = str(out / "index.html")
+    if args.json:
+        obj = _clean(d.to_json())
+        obj["data"] = rec.source
+        obj["report"] = report_path
+        print(json.dumps(obj, allow_nan=False))
+    else:
+        print(_text(d, rec.source))
+        if report_path:
+            print(f"report: {report_path}")
+    return 0

@@ -1,0 +1,141 @@
+"""``hyst fit DATA``: identify a hysteresis model from a bag or CSV file and write a params file.
+
+Examples::
+
+    hyst fit bags/run1                                   # rosbag2 directory, /stage/state, MBW, fast
+    hyst fit run.mcap --method epso --seed 1 --out params.yaml
+    hyst fit piezo.csv --columns t_s,voltage_V,displacement_um --units s,V,um --train 3.257:6.257 --json
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError, HystError, ParamsError
+
+__all__ = ["register", "run", "add_data_options", "load_checked", "parse_split"]
+
+
+def add_data_options(p: argparse.ArgumentParser) -> None:
+    """Options shared by commands that read a record (bag or CSV)."""
+    p.add_argument("--topic", default="/stage/state", help="state topic in a bag (default /stage/state)")
+    p.add_argument("--columns", help="CSV columns for t,u,y, e.g. t_s,voltage_V,displacement_um (default t,u,y)")
+    p.add_argument("--units", help="units of those columns, e.g. s,V,um (default: from the name suffix, else SI)")
+    p.add_argument("--gaps", choices=("error", "longest"), default="error",
+                   help="lost samples in the record: stop with an error (default) or keep the longest regular part")
+    p.add_argument("--resample", type=float, metavar="HZ",
+                   help="resample to this rate before fitting (MBW's δ and rate terms are per sample)")
+
+
+def parse_split(train: str | None, val_fraction: float):
+    """``--train T0:T1`` → (t0, t1); otherwise the validation fraction."""
+    if train:
+        try:
+            a, b = (float(x) for x in train.split(":"))
+        except ValueError:
+            raise DataError(f"--train needs T0:T1 in seconds, got {train!r}") from None
+        if not b > a:
+            raise DataError(f"--train end must be after its start ({train})")
+        return (a, b)
+    return val_fraction
+
+
+def load_checked(args) -> "Record":  # noqa: F821
+    """Read DATA per the data options and check it; returns a regular, finite record in SI units."""
+    from ..io import load_record
+    from ..io.record import Record
+    rec = load_record(args.data, topic=args.topic, columns=args.columns, units=args.units)
+    if args.gaps == "longest":
+        rec = rec.longest_segment()
+        if rec.meta.get("dropped_samples"):
+            print(f"hyst: note: using samples {rec.meta['segment'][0]}–{rec.meta['segment'][1]} of {args.data} "
+                  f"(dropped {rec.meta['dropped_samples']})", file=sys.stderr)
+    rec.check()
+    if args.resample:
+        if not args.resample > 0:
+            raise DataError("--resample must be positive")
+        dt = 1.0 / args.resample
+        t = np.arange(rec.t[0], rec.t[-1] + 0.5 * dt, dt)
+        t = t[t <= rec.t[-1]]
+        rec = Record(t, np.interp(t, rec.t, rec.u), np.interp(t, rec.t, rec.y), dict(rec.meta, resampled=args.resample))
+        rec.check()
+    return rec
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("fit", help="identify a hysteresis model from a bag or CSV",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("data", help="rosbag2 directory, .mcap file, or CSV")
+    p.add_argument("--model", default="mbw", help="base model: mbw (default), bw, pi")
+    p.add_argument("--effects", default="", help="comma-separated effects composed onto the base, e.g. creep,delay")
+    p.add_argument("--method", choices=("fast", "epso", "lsq"), default="fast", help="identifier (default fast)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (EPSO)")
+    p.add_argument("--iterations", type=int, default=None, help="EPSO iterations (default 200)")
+    p.add_argument("--train", metavar="T0:T1", help="train on T0 <= t < T1 (s), validate on t >= T1")
+    p.add_argument("--val-fraction", type=float, default=0.25,
+                   help="hold out the last fraction of the record for validation (default 0.25; 0 = none)")
+    p.add_argument("--out", help="write the params file here (ROS 2 parameters YAML)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_data_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..identify import fit
+    from ..io import spec_from_model, write_params
+    from ..models import BASE_MODELS, data_config
+    from ..spec import build_model
+
+    out = Path(args.out) if args.out else None
+    if out is not None:  # fail before a long fit, not after it
+        if out.exists() and not args.force:
+            raise ParamsError(f"{out} exists; use --force to overwrite it")
+        if not (out.parent if str(out.parent) else Path(".")).is_dir():
+            raise ParamsError(f"{out.parent}: no such directory")
+    if args.model not in BASE_MODELS:
+        raise ParamsError(f"unknown model {args.model!r}; choose one of {', '.join(sorted(BASE_MODELS))}")
+    effects = [e.strip() for e in args.effects.split(",") if e.strip()]
+    split = parse_split(args.train, args.val_fraction)
+    rec = load_checked(args)
+    config = data_config(rec.u, rec.y)
+    config["dt"] = rec.dt
+    model = build_model(args.model, effects, config)
+    options = {}
+    if args.iterations is not None:
+        if args.method != "epso":
+            raise HystError("--iterations applies to --method epso only")
+        options["iterations"] = args.iterations
+    res = fit(model, rec.t, rec.u, rec.y, method=args.method, seed=args.seed, split=split,
+              progress=not args.quiet, **options)
+    if out is not None:
+        prov = {"method": args.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": str(args.data),
+                "split": res.split, "seconds": round(res.seconds, 3), "samples": len(rec)}
+        if args.seed is not None:
+            prov["seed"] = args.seed
+        write_params(out, spec_from_model(model, res.theta, fit=prov, dt=rec.dt), force=args.force)
+    if args.json:
+        obj = {"model": args.model, "effects": effects, "method": args.method, "rmse": res.rmse,
+               "rmse_train": res.rmse_train, "seconds": res.seconds, "params": res.params,
+               "n_evaluations": res.n_evaluations, "split": res.split, "samples": len(rec), "dt": rec.dt,
+               "data": str(args.data), "out": str(out) if out else None}
+        print(json.dumps(obj))
+    else:
+        print(_table(res, rec, out))
+    return 0
+
+
+def _table(res, rec, out) -> str:
+    lines = [f"model {res.model}  method {res.method}  {len(rec)} samples at {1.0 / rec.dt:.6g} Hz  "
+             f"{res.seconds:.2f} s  {res.n_evaluations} evaluations",
+             f"RMSE validation {res.rmse * 1e9:.2f} nm   training {res.rmse_train * 1e9:.2f} nm",
+             f"split: {res.split}", "", f"{'parameter':<16}{'value':>16}"]
+    lines += [f"{k:<16}{v:>16.8g}" for k, v in res.params.items()]
+    if out:
+        lines += ["", f"wrote {out}"]
+    return "\n".join(lines)

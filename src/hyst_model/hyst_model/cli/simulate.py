@@ -1,0 +1,60 @@
+"""``hyst simulate --params P --input u.csv --out y.csv``: run a fitted model on an input record.
+
+The input CSV has columns ``t,u`` (s, V; other names/units via ``--columns``/``--units``); the output CSV has
+``t,u,y`` in SI units (y in m). The model starts from rest (the state reached holding ``u[0]``) and includes the
+fitted output offset, so y is what the sensor would read. MBW's δ and rate terms are per sample: the input must be
+sampled at the rate the model was identified at (``model.dt`` in the params file) unless ``--any-rate``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from ..errors import DataError, FitError
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("simulate", help="simulate a fitted model on an input CSV",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--params", required=True, help="params file written by hyst fit")
+    p.add_argument("--input", required=True, help="CSV with t,u (s, V)")
+    p.add_argument("--out", required=True, help="CSV to write with t,u,y (s, V, m)")
+    p.add_argument("--columns", help="input columns for t,u (default t,u)")
+    p.add_argument("--units", help="units of those columns, e.g. ms,V")
+    p.add_argument("--any-rate", action="store_true", help="allow a sample rate different from the fitted one")
+    p.add_argument("--force", action="store_true", help="overwrite --out")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from pathlib import Path
+
+    from ..io import read_params, write_csv
+    from ..io.csvio import read_input_csv
+
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise DataError(f"{out} exists; use --force to overwrite it")
+    spec = read_params(args.params)
+    model = spec.model()
+    theta = spec.theta(model)
+    t, u = read_input_csv(args.input, args.columns, args.units)
+    if t.size == 0:
+        raise DataError(f"{args.input}: no samples")
+    dt_fit = spec.config.get("dt")
+    if t.size > 1 and dt_fit and not args.any_rate:
+        dt = float(np.median(np.diff(t)))
+        if abs(dt - float(dt_fit)) > 0.01 * float(dt_fit):
+            raise DataError(f"{args.input} is sampled at {1 / dt:.6g} Hz but the model was identified at "
+                            f"{1 / float(dt_fit):.6g} Hz; resample the input or pass --any-rate")
+    with np.errstate(all="ignore"):
+        y = np.asarray(model.simulate(theta, t, u), dtype=np.float64)
+    if not np.all(np.isfinite(y)):
+        raise FitError(f"the model diverges on {args.input} (input outside the range it was identified on?)")
+    write_csv(out, {"t": t, "u": u, "y": y}, force=args.force)
+    print(f"wrote {out} ({t.size} samples, y {y.min() * 1e6:.4g} .. {y.max() * 1e6:.4g} µm)", file=sys.stderr)
+    return 0

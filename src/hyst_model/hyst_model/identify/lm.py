@@ -1,0 +1,118 @@
+"""A compact bounded Levenberg-Marquardt for long records and few parameters (n ≫ p).
+
+Output-error fitting of MBW has n ≈ 10⁴–10⁵ residuals and p ≤ 9 parameters. :func:`scipy.optimize.least_squares`
+(trust-region reflective) factorises the n × p Jacobian every iteration; here each iteration forms the p × p normal
+equations JᵀJ once (O(n p²)) and solves small damped systems, which is an order of magnitude cheaper at the same
+accuracy when an exact Jacobian is available (MBW's forward sensitivities). Bounds are handled by an active set:
+a parameter on a bound whose gradient pushes outward is frozen for that step, the others step and are clipped.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+__all__ = ["LMResult", "bounded_lm"]
+
+
+@dataclass
+class LMResult:
+    x: np.ndarray
+    cost: float
+    nfev: int
+    nit: int
+    status: int  # 1 converged, 0 iteration budget exhausted, -1 no progress possible
+    message: str
+
+
+@njit(cache=True)
+def _normal_equations(J: np.ndarray, r: np.ndarray):
+    """JᵀJ, Jᵀr and rᵀr in one pass, single-threaded (OpenBLAS's threaded gemv/ddot stall on a loaded machine)."""
+    n, p = J.shape
+    H = np.zeros((p, p))
+    g = np.zeros(p)
+    rr = 0.0
+    for k in range(n):
+        rk = r[k]
+        rr += rk * rk
+        for i in range(p):
+            a = J[k, i]
+            g[i] += a * rk
+            for j in range(i, p):
+                H[i, j] += a * J[k, j]
+    for i in range(p):
+        for j in range(i):
+            H[i, j] = H[j, i]
+    return H, g, rr
+
+
+def bounded_lm(fun_jac: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], x0: np.ndarray, lower: np.ndarray,
+               upper: np.ndarray, *, max_iter: int = 100, ftol: float = 1e-10, xtol: float = 1e-10,
+               lam0: float = 1e-3) -> LMResult:
+    """Minimise ½‖r(x)‖² within ``[lower, upper]``.
+
+    Parameters
+    ----------
+    fun_jac : callable
+        ``x -> (r, J)``: residuals (n,) and Jacobian (n, p); non-finite residuals mean "reject this point".
+    x0 : ndarray
+        Start (clipped into the bounds).
+    max_iter : int
+        Budget of accepted-or-rejected trial points.
+    ftol, xtol : float
+        Stop when the relative cost decrease or the step (relative to the bound span) falls below these.
+    """
+    lower = np.asarray(lower, dtype=np.float64)
+    upper = np.asarray(upper, dtype=np.float64)
+    x = np.clip(np.asarray(x0, dtype=np.float64), lower, upper)
+    r, J = fun_jac(x)
+    nfev = 1
+    if not np.all(np.isfinite(r)):
+        return LMResult(x, np.inf, nfev, 0, -1, "start is not finite")
+    H, g, rr = _normal_equations(np.ascontiguousarray(J), r)
+    cost = 0.5 * rr
+    lam = lam0
+    span = np.maximum(upper - lower, 1e-300)
+    status, message, nit = 0, "iteration budget exhausted", 0
+    while nfev < max_iter:
+        nit += 1
+        eps = 1e-12 * span
+        frozen = ((x <= lower + eps) & (g > 0)) | ((x >= upper - eps) & (g < 0))
+        free = ~frozen
+        if not free.any():
+            status, message = 1, "all parameters on active bounds"
+            break
+        Hf = H[np.ix_(free, free)]
+        d = np.diag(Hf).copy()
+        d[d <= 0] = 1.0
+        try:
+            step_f = np.linalg.solve(Hf + lam * np.diag(d), -g[free])
+        except np.linalg.LinAlgError:
+            lam *= 10.0
+            continue
+        step = np.zeros_like(x)
+        step[free] = step_f
+        x_new = np.clip(x + step, lower, upper)
+        r_new, J_new = fun_jac(x_new)
+        nfev += 1
+        if np.all(np.isfinite(r_new)):
+            H_new, g_new, rr = _normal_equations(np.ascontiguousarray(J_new), r_new)
+            c_new = 0.5 * rr
+        else:
+            c_new = np.inf
+        if c_new < cost:
+            dc = cost - c_new
+            dx = np.max(np.abs(x_new - x) / span)
+            x, cost, H, g = x_new, c_new, H_new, g_new
+            lam = max(lam / 3.0, 1e-15)
+            if dc <= ftol * cost or dx <= xtol:
+                status, message = 1, "converged (relative cost change and step below tolerance)"
+                break
+        else:
+            lam *= 4.0
+            if lam > 1e10:
+                status, message = 1, "converged (no further decrease possible)"
+                break
+    return LMResult(x, 2.0 * cost, nfev, nit, status, message)

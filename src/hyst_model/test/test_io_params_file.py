@@ -1,0 +1,79 @@
+"""Params file: ROS 2 parameters YAML round trip, no overwrite without force, atomic writes."""
+import os
+
+import numpy as np
+import pytest
+import yaml
+
+from hyst_model.errors import EffectError, ParamsError
+from hyst_model.io import read_params, spec_from_model, write_params
+from hyst_model.io.params_file import flatten, nest
+from hyst_model.models import BASE_MODELS
+
+
+def _spec():
+    m = BASE_MODELS["mbw"]({"u_scale": 15.0, "y_scale": 5.42e-6})
+    theta = m.pack({"zeta1": 0.4029, "psi1": 0.0345, "alpha1": -0.0394, "delta1": 0.962, "delta2": 0.9511,
+                    "offset": -1.6e-6})
+    return m, theta, spec_from_model(m, theta, fit={"method": "fast", "rmse": 1.2e-8}, dt=5e-4)
+
+
+def test_round_trip_rebuilds_the_same_model(tmp_path):
+    m, theta, spec = _spec()
+    write_params(tmp_path / "p.yaml", spec)
+    doc = yaml.safe_load((tmp_path / "p.yaml").read_text())
+    model = doc["/**"]["ros__parameters"]["model"]
+    assert model["base"] == "mbw" and model["effects"] == [] and model["dt"] == 5e-4
+    assert all(isinstance(v, float) for k, v in model.items() if k not in ("base", "effects"))  # ROS typing
+    back = read_params(tmp_path / "p.yaml")
+    m2 = back.model()
+    np.testing.assert_array_equal(back.theta(m2), theta)
+    t = np.arange(500) * 5e-4
+    u = 75 + 75 * np.sin(2 * np.pi * 4 * t)
+    np.testing.assert_array_equal(m2.simulate(back.theta(m2), t, u), m.simulate(theta, t, u))
+    assert back.fit["method"] == "fast" and back.parameters()["model.zeta1"] == 0.4029
+
+
+def test_never_overwrites_without_force_and_leaves_no_temporaries(tmp_path):
+    _, _, spec = _spec()
+    p = tmp_path / "p.yaml"
+    p.write_text("precious\n")
+    with pytest.raises(ParamsError, match="exists; use --force"):
+        write_params(p, spec)
+    assert p.read_text() == "precious\n"
+    write_params(p, spec, force=True)
+    assert read_params(p).base == "mbw"
+    assert sorted(os.listdir(tmp_path)) == ["p.yaml"]
+
+
+def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
+    _, _, spec = _spec()
+    p = tmp_path / "p.yaml"
+    p.write_text("precious\n")
+
+    def boom(*a, **k):
+        raise OSError("disk full")
+    monkeypatch.setattr(os, "replace", boom)
+    with pytest.raises(OSError):
+        write_params(p, spec, force=True)
+    assert p.read_text() == "precious\n" and sorted(os.listdir(tmp_path)) == ["p.yaml"]
+
+
+@pytest.mark.parametrize("text,err,match", [
+    ("just text", ParamsError, "not a ROS 2 parameters file"),
+    ("/**:\n  ros__parameters:\n    other: 1\n", ParamsError, "no 'ros__parameters: model:'"),
+    ("/**:\n  ros__parameters:\n    model:\n      base: nope\n", ParamsError, "unknown base model 'nope'"),
+    ("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      zeta1: 0.4\n", ParamsError, "lacks model parameter"),
+    ("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      effects: [nosuch]\n", EffectError, "nosuch"),
+])
+def test_bad_files(tmp_path, text, err, match):
+    (tmp_path / "p.yaml").write_text(text)
+    with pytest.raises(err, match=match):
+        read_params(tmp_path / "p.yaml")
+    with pytest.raises(ParamsError, match="no such"):
+        read_params(tmp_path / "missing.yaml")
+
+
+def test_flatten_nest_inverse():
+    d = {"zeta1": 1.0, "creep": {"gain": 2.0, "tau": {"a": 3.0}}}
+    assert nest(flatten(d)) == d and flatten(d)["creep.tau.a"] == 3.0

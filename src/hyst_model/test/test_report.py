@@ -1,0 +1,84 @@
+"""HTML/PNG report of compare and diagnose: content, error ladder, directory policy."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from hyst_model.diagnose.report import MARKER, prepare_dir, write_report
+from hyst_model.diagnose.stats import compare_stats
+from hyst_model.errors import HystError
+from hyst_model.io.record import Record
+
+
+def _record():
+    fs = 500.0
+    t = np.arange(int(4 * fs)) / fs
+    u = 75 - 75 * np.cos(2 * np.pi * 1.0 * t)
+    y = 2e-7 * u + 1e-6 * np.sin(2 * np.pi * t)  # a loop
+    yhat = 2e-7 * u
+    return Record(t, u, y, {"source": "synthetic <loop>"}), yhat
+
+
+def _png_ok(p):
+    b = p.read_bytes()
+    return b[:8] == b"\x89PNG\r\n\x1a\n" and len(b) > 2000
+
+
+def test_report_contains_plots_tables_and_escaped_text(tmp_path):
+    rec, yhat = _record()
+    st = compare_stats(rec.t, rec.u, rec.y, yhat)
+    ladder = [{"model": "mbw", "rmse": 3e-7, "rmse_train": 2.9e-7}, {"model": "mbw+creep", "rmse": 5e-8}]
+    diagnosis = {"baseline": {"model": "mbw", "rmse": 3e-7}, "missing": "creep",
+                 "candidates": [{"effect": "creep", "rmse": 5e-8, "improvement": 6.0,
+                                 "evidence": "residual keeps growing for seconds <log time>"}]}
+    d = write_report(tmp_path / "r", rec, yhat, st, ladder=ladder, diagnosis=diagnosis, title="T & T")
+    html = (d / "index.html").read_text()
+    for name in ("time.png", "loop.png", "residual.png", "spectrum.png", "correlation.png", "ladder.png"):
+        assert _png_ok(d / name) and f"src='{name}'" in html
+    assert "T &amp; T" in html and "synthetic &lt;loop&gt;" in html and "&lt;log time&gt;" in html
+    assert "<b>creep</b>" in html
+    # overall RMSE in nm appears in the fit table
+    rmse_nm = st.overall.rmse * 1e9
+    assert f"{rmse_nm:.4g}" in html
+    # one row per segment, per ladder rung
+    assert html.count("<td>mbw+creep</td>") == 1
+    assert len(re.findall(r"<td>sine 1 Hz</td>", html)) == 1
+    assert (d / MARKER).exists()
+
+
+def test_no_ladder_no_ladder_png(tmp_path):
+    rec, yhat = _record()
+    d = write_report(tmp_path / "r", rec, yhat, compare_stats(rec.t, rec.u, rec.y, yhat))
+    assert not (d / "ladder.png").exists() and "Error ladder" not in (d / "index.html").read_text()
+
+
+def test_directory_policy(tmp_path):
+    rec, yhat = _record()
+    st = compare_stats(rec.t, rec.u, rec.y, yhat)
+    foreign = tmp_path / "data"
+    foreign.mkdir()
+    (foreign / "run1.csv").write_text("t,u,y\n")
+    with pytest.raises(HystError, match="not a hyst report"):
+        write_report(foreign, rec, yhat, st)
+    assert [p.name for p in foreign.iterdir()] == ["run1.csv"]
+    # --force writes next to the user's file and keeps it
+    write_report(foreign, rec, yhat, st, force=True)
+    assert (foreign / "run1.csv").read_text() == "t,u,y\n" and (foreign / "index.html").exists()
+    # a hyst report directory that later got a foreign file is refused too
+    (foreign / "notes.txt").write_text("mine")
+    with pytest.raises(HystError, match="did not write"):
+        prepare_dir(foreign)
+    f = tmp_path / "file"
+    f.write_text("x")
+    with pytest.raises(HystError, match="is a file"):
+        prepare_dir(f)
+
+
+def test_length_mismatch_is_an_error(tmp_path):
+    rec, yhat = _record()
+    st = compare_stats(rec.t, rec.u, rec.y, yhat)
+    with pytest.raises(HystError, match="same length"):
+        write_report(tmp_path / "r", rec, yhat[:-1], st)
+    assert not (tmp_path / "r").exists()

@@ -1,0 +1,149 @@
+"""hyst_bag_play: replay a rosbag2 bag's topics with the original timing (``ros2 bag play`` stand-in).
+
+Usage::
+
+    hyst_bag_play BAG [--topics /stage/state ...] [--rate 1.0] [--loop] [--delay 0.5] [--wait-for-subscribers]
+
+Messages are published as the recorded serialized bytes (headers and stamps unchanged) at their recorded
+receive times relative to the first message, divided by ``--rate``. A player thread sleeps until each message
+is due (sub-millisecond on Linux) while the main thread spins the node; if it falls behind it publishes the
+late messages at once rather than dropping them. ``--loop`` repeats until SIGINT/SIGTERM.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from .bagio import RawMessage, message_class, read_raw
+from .errors import BagError, SimError
+
+__all__ = ["PlayNode", "main"]
+
+
+class PlayNode(Node):
+    """Publish a list of raw messages with their relative timing on a player thread.
+
+    Parameters
+    ----------
+    messages : list of RawMessage
+        In time order (as :func:`hyst_sim.bagio.read_raw` yields them).
+    rate : float
+        Playback speed factor (2.0 = twice as fast).
+    loop : bool
+        Start again after the last message.
+    delay : float
+        Seconds to wait before the first message (discovery).
+    wait_for_subscribers : float
+        If > 0, wait up to this many seconds until every topic has a subscriber before starting.
+    """
+
+    def __init__(self, messages: list[RawMessage], rate: float = 1.0, loop: bool = False, delay: float = 0.0,
+                 wait_for_subscribers: float = 0.0, **kwargs):
+        super().__init__("hyst_bag_play", **kwargs)
+        if not messages:
+            raise BagError("the bag holds no messages to play")
+        if not rate > 0:
+            raise BagError("--rate must be positive")
+        self.messages, self.rate, self.loop = messages, float(rate), bool(loop)
+        self.delay, self.wait = float(delay), float(wait_for_subscribers)
+        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        self._pubs = {}
+        for m in messages:
+            if m.topic not in self._pubs:
+                self._pubs[m.topic] = self.create_publisher(message_class(m.msgtype), m.topic, qos)
+        self.published = 0
+        self.done = threading.Event()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._play, name="hyst_bag_play", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)
+
+    def _play(self) -> None:
+        try:
+            end = time.monotonic() + self.wait
+            while self.wait > 0 and time.monotonic() < end and not self._stop.is_set():
+                if all(p.get_subscription_count() > 0 for p in self._pubs.values()):
+                    break
+                time.sleep(0.01)
+            if self._stop.wait(self.delay):
+                return
+            t_first = self.messages[0].t_ns
+            while not self._stop.is_set():
+                start = time.monotonic()
+                for m in self.messages:
+                    due = start + (m.t_ns - t_first) * 1e-9 / self.rate
+                    wait = due - time.monotonic()
+                    if wait > 0 and self._stop.wait(wait):
+                        return
+                    self._pubs[m.topic].publish(m.data)
+                    self.published += 1
+                if not self.loop:
+                    return
+        finally:
+            self.done.set()
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog="hyst_bag_play", description=__doc__.split("\n\n")[0])
+    ap.add_argument("bag", type=Path, help="rosbag2 directory (MCAP or sqlite3)")
+    ap.add_argument("--topics", nargs="+", default=None, help="only these topics")
+    ap.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1.0)")
+    ap.add_argument("--loop", action="store_true", help="repeat until interrupted")
+    ap.add_argument("--delay", type=float, default=0.5, help="seconds before the first message (default 0.5)")
+    ap.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="S",
+                    help="wait up to S seconds for a subscriber on every topic before starting")
+    a = ap.parse_args(argv)
+    if not a.rate > 0:
+        ap.error("--rate must be positive")
+    if a.delay < 0 or a.wait_for_subscribers < 0:
+        ap.error("--delay and --wait-for-subscribers must not be negative")
+    return a
+
+
+def main(args=None) -> int:
+    """Console script ``hyst_bag_play``."""
+    from rclpy.utilities import remove_ros_args
+
+    a = _parse(remove_ros_args(args if args is not None else sys.argv)[1:])
+    try:
+        messages = list(read_raw(a.bag, a.topics))
+    except SimError as err:
+        print(f"hyst_bag_play: {err}", file=sys.stderr)
+        return 2
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = PlayNode(messages, a.rate, a.loop, a.delay, a.wait_for_subscribers)
+        node.start()
+        while rclpy.ok() and not node.done.is_set():
+            rclpy.spin_once(node, timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except SimError as err:
+        print(f"hyst_bag_play: {err}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.stop()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    print(f"hyst_bag_play: published {node.published if node else 0} messages from {a.bag}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

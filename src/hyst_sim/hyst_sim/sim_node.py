@@ -1,0 +1,378 @@
+"""hyst_sim_node: the simulated stage on ROS topics, interchangeable with the driver (docs/ARCHITECTURE.md).
+
+Publishes ``/stage/state`` (``sensor_msgs/JointState``: ``name=['stage']``, ``position[0]`` sensor reading in m,
+``effort[0]`` applied voltage in V, ``header.stamp`` = sample time), subscribes ``/stage/command``
+(``effort[0]`` commanded V, ``header.stamp`` = stamp of the state it answers), reports health (clipping, command
+timeout, timing) on ``/diagnostics`` and in a throttled log. The plant's internals — true position, effect
+names and strengths loaded from ``scenario_file`` — never appear on a topic, in a log or in a parameter.
+
+Modes
+-----
+``realtime``
+    A timer at ``rate`` takes one sample per period with the latest command, stamped with the node clock. No
+    command for ``command_timeout`` s → the voltage ramps to ``v_safe`` at ``safe_ramp_rate`` V/s.
+``lockstep`` (deterministic tests)
+    Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has a
+    subscriber and ``/stage/command`` a publisher, and re-published with the *same* stamp every 0.5 s until it
+    is answered. Each command whose ``header.stamp`` equals the latest state's stamp takes exactly one sample
+    and publishes state ``k+1`` stamped ``(k+1)/rate`` s; commands with any other stamp (duplicates, answers to
+    a repeated state) are dropped and counted as stale. Same parameters and seed → same data, bit for bit.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
+                                SetParametersResult)
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from .errors import SimError
+from .plant import Plant, PlantConfig
+from .profiles import get_profile
+from .scenario import load_scenario
+from .truth_effects import EFFECT_NAMES, Effects
+
+__all__ = ["SimNode", "SimSettings", "plant_config", "main"]
+
+_DIAG_PERIOD = 1.0      # s between /diagnostics messages
+_ANNOUNCE_PERIOD = 0.5  # s between repeats of the unanswered lockstep sample 0
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """All node parameters as plain values (the frozen config the node swaps on a parameter change)."""
+
+    rate: float
+    profile: str
+    v_min: float
+    v_max: float
+    slew_max: float
+    command_timeout: float
+    v_safe: float
+    safe_ramp_rate: float
+    frame_id: str
+    mode: str
+    params_file: str
+    scenario_file: str
+    seed: int
+    effects: tuple  # ((name, strength), ...) in EFFECT_NAMES order
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate
+
+    def validate(self) -> None:
+        """Raise :class:`SimError` with a reason for inconsistent values (ranges are checked by ROS)."""
+        prof = get_profile(self.profile)
+        if not (prof.v_min <= self.v_min < self.v_max <= prof.v_max):
+            raise SimError(f"need {prof.v_min} <= v_min < v_max <= {prof.v_max} V for profile {prof.name!r}, got "
+                           f"v_min={self.v_min}, v_max={self.v_max} (set them in the same call as profile)")
+        if not self.v_min <= self.v_safe <= self.v_max:
+            raise SimError(f"v_safe = {self.v_safe} V must lie in [v_min, v_max] = [{self.v_min}, {self.v_max}] V")
+        if self.mode not in ("realtime", "lockstep"):
+            raise SimError(f"mode must be 'realtime' or 'lockstep', got {self.mode!r}")
+
+
+def plant_config(s: SimSettings) -> PlantConfig:
+    """The plant a settings object describes: profile or params file, limits, effects, then the scenario."""
+    common = dict(sensor=False, seed=s.seed, v_min=s.v_min, v_max=s.v_max, slew_max=s.slew_max, v_init=s.v_safe)
+    if s.params_file:
+        cfg = PlantConfig.from_params_file(s.params_file, s.profile, s.rate, **common)
+    else:
+        cfg = PlantConfig.for_profile(s.profile, s.rate, **common)
+    cfg = cfg.with_strengths(**dict(s.effects))
+    if s.scenario_file:
+        cfg = load_scenario(s.scenario_file).apply(cfg)
+    return cfg
+
+
+def _fp(lo: float, hi: float) -> list:
+    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+
+
+class SimNode(Node):
+    """The simulated stage node; see the module docstring."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("hyst_sim", **kwargs)
+        self._declare_parameters()
+        self._settings = self._read_settings()
+        try:
+            self._settings.validate()
+            pc = plant_config(self._settings)
+            self._plant = Plant(pc)
+        except (SimError, ValueError) as err:
+            raise SimError(f"invalid start-up parameters: {err}") from err
+        self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._after_set)
+
+        self._pub = self.create_publisher(JointState, "/stage/state", 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(JointState, "/stage/command", self._on_command, 10)
+        self._cmd = None                 # last commanded voltage (V)
+        self._cmd_wall = None            # monotonic time it arrived
+        self._k = 0                      # samples taken
+        self._stamp_ns = 0               # lockstep clock (ns)
+        self._last_msg: JointState | None = None
+        self._answered = False
+        self._counts = dict.fromkeys(("samples", "clip_range", "clip_slew", "nonfinite", "bad_messages", "stale",
+                                      "timeouts", "late_ticks"), 0)
+        self._period_counts = dict(self._counts)
+        self._timed_out = False
+        self._last_tick = None
+        self._timer = None
+        if self._settings.mode == "realtime":
+            self._timer = self.create_timer(self._settings.dt, self._tick)
+        else:
+            self._timer = self.create_timer(0.01, self._announce)
+            self._announce_at = 0.0
+        self.create_timer(_DIAG_PERIOD, self._publish_diagnostics)
+        self.get_logger().info(
+            f"simulated stage: profile {self._settings.profile}, {self._settings.rate:g} Hz, mode "
+            f"{self._settings.mode}, model {'from ' + self._settings.params_file if self._settings.params_file else 'embedded default'}"
+            f"{', scenario loaded' if self._settings.scenario_file else ''}")
+
+    # Parameters ---------------------------------------------------------------------------------------------
+    def _declare_parameters(self) -> None:
+        d = self.declare_parameter
+        d("profile", "pea", ParameterDescriptor(description="actuator profile: pea (0-150 V) | gma (+-5 V)"))
+        prof = get_profile(self.get_parameter("profile").value)
+        d("rate", 1000.0, ParameterDescriptor(description="sample rate (Hz); 2000 needs a single process",
+                                              floating_point_range=_fp(1.0, 5000.0)))
+        d("v_min", prof.v_min, ParameterDescriptor(description="lowest voltage applied (V), inside the profile",
+                                                   floating_point_range=_fp(-5.0, 150.0)))
+        d("v_max", prof.v_max, ParameterDescriptor(description="highest voltage applied (V), inside the profile",
+                                                   floating_point_range=_fp(-5.0, 150.0)))
+        d("slew_max", prof.slew_max, ParameterDescriptor(description="amplifier slew limit (V/s)",
+                                                         floating_point_range=_fp(1e-3, 1e8)))
+        d("command_timeout", 0.2, ParameterDescriptor(
+            description="no command for this long (s) -> ramp to v_safe (realtime mode)",
+            floating_point_range=_fp(1e-3, 3600.0)))
+        d("v_safe", prof.v_safe, ParameterDescriptor(description="voltage at start and after a timeout (V)",
+                                                     floating_point_range=_fp(-5.0, 150.0)))
+        d("safe_ramp_rate", 100.0, ParameterDescriptor(description="ramp rate towards v_safe after a timeout (V/s)",
+                                                       floating_point_range=_fp(1e-3, 1e8)))
+        d("frame_id", "stage", ParameterDescriptor(description="header.frame_id of /stage/state"))
+        d("mode", "realtime", ParameterDescriptor(
+            description="realtime | lockstep (one sample per answered state; deterministic)", read_only=True))
+        d("params_file", "", ParameterDescriptor(description="MBW params file ('' = embedded default stage)"))
+        d("scenario_file", "", ParameterDescriptor(
+            description="hidden-effects scenario file ('' = none); its contents are never reported"))
+        d("seed", 0, ParameterDescriptor(description="seed of sensor noise and drift (applies at start)",
+                                         integer_range=[IntegerRange(from_value=0, to_value=2**31 - 1, step=1)]))
+        for name in EFFECT_NAMES:
+            spec = Effects.spec(name)
+            default = {"noise": prof.sensor_noise, "quantization": prof.sensor_resolution}.get(name, 0.0)
+            desc = f"{spec.doc} [{spec.unit}]" if spec.unit else spec.doc
+            if spec.integer:
+                d(f"effects.{name}", int(default), ParameterDescriptor(
+                    description=desc, integer_range=[IntegerRange(from_value=int(spec.lower),
+                                                                  to_value=int(spec.upper), step=1)]))
+            else:
+                d(f"effects.{name}", float(default), ParameterDescriptor(
+                    description=desc, floating_point_range=_fp(spec.lower, spec.upper)))
+
+    def _read_settings(self, changes: dict | None = None) -> SimSettings:
+        def get(name):
+            if changes and name in changes:
+                return changes[name]
+            return self.get_parameter(name).value
+
+        return SimSettings(
+            rate=float(get("rate")), profile=str(get("profile")), v_min=float(get("v_min")),
+            v_max=float(get("v_max")), slew_max=float(get("slew_max")), command_timeout=float(get("command_timeout")),
+            v_safe=float(get("v_safe")), safe_ramp_rate=float(get("safe_ramp_rate")), frame_id=str(get("frame_id")),
+            mode=str(get("mode")), params_file=str(get("params_file")), scenario_file=str(get("scenario_file")),
+            seed=int(get("seed")), effects=tuple((n, get(f"effects.{n}")) for n in EFFECT_NAMES))
+
+    def _on_set(self, params) -> SetParametersResult:
+        changes = {p.name: p.value for p in params}
+        for p in params:
+            if p.name.startswith("effects.") and p.type_ == ParameterType.PARAMETER_DOUBLE \
+                    and not math.isfinite(p.value):
+                return SetParametersResult(successful=False, reason=f"{p.name} must be finite")
+        try:
+            s = self._read_settings(changes)
+            s.validate()
+            Plant(plant_config(s))  # builds and checks everything the swap will need
+        except (SimError, ValueError, TypeError) as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def _after_set(self, params) -> None:
+        old, new = self._settings, self._read_settings()
+        self._settings = new
+        self._plant.reconfigure(plant_config(new))
+        if new.mode == "realtime" and new.rate != old.rate:
+            self.destroy_timer(self._timer)
+            self._timer = self.create_timer(new.dt, self._tick)
+        self.get_logger().info("parameters applied: " + ", ".join(
+            p.name for p in params if not p.name.startswith(("scenario_file",))))
+
+    # Commands and samples -----------------------------------------------------------------------------------
+    def _on_command(self, msg: JointState) -> None:
+        if not msg.effort:
+            self._count("bad_messages")
+            self.get_logger().warning("command without effort[0] (V) ignored", throttle_duration_sec=1.0)
+            return
+        v = float(msg.effort[0])
+        if self._settings.mode == "realtime":
+            self._cmd, self._cmd_wall = v, time.monotonic()
+            return
+        last = self._last_msg
+        if last is None or (msg.header.stamp.sec, msg.header.stamp.nanosec) != (last.header.stamp.sec,
+                                                                                 last.header.stamp.nanosec):
+            self._count("stale")
+            return
+        self._answered = True
+        self._stamp_ns += int(round(1e9 * self._settings.dt))
+        self._sample(v, _time_from_ns(self._stamp_ns))
+
+    def _sample(self, v_cmd: float, stamp: Time) -> None:
+        s = self._settings
+        try:
+            r = self._plant.step(v_cmd)
+        except SimError as err:  # a diverging user model: say so once per second, keep the node alive
+            self.get_logger().error(str(err), throttle_duration_sec=1.0)
+            self._plant.reset(self._plant.u_applied if s.v_min <= self._plant.u_applied <= s.v_max else None)
+            return
+        self._k += 1
+        self._count("samples")
+        if r.clipped:
+            if not math.isfinite(v_cmd):
+                self._count("nonfinite")
+            elif v_cmd < s.v_min or v_cmd > s.v_max:
+                self._count("clip_range")
+            else:
+                self._count("clip_slew")
+            self.get_logger().warning(
+                f"command {v_cmd:.6g} V clipped to {r.u_applied:.6g} V (range [{s.v_min:g}, {s.v_max:g}] V, slew "
+                f"{s.slew_max:g} V/s)", throttle_duration_sec=1.0)
+        msg = JointState()
+        msg.header.stamp = stamp
+        msg.header.frame_id = s.frame_id
+        msg.name = ["stage"]
+        msg.position = [r.y]
+        msg.effort = [r.u_applied]
+        self._last_msg = msg
+        self._pub.publish(msg)
+
+    def _tick(self) -> None:
+        s = self._settings
+        now = time.monotonic()
+        if self._last_tick is not None and now - self._last_tick > 1.5 * s.dt:
+            self._count("late_ticks", int((now - self._last_tick) / s.dt - 0.5))
+        self._last_tick = now
+        if self._cmd is not None and now - self._cmd_wall <= s.command_timeout:
+            v = self._cmd
+            self._timed_out = False
+        else:
+            if self._cmd is not None and not self._timed_out:
+                self._timed_out = True
+                self._count("timeouts")
+                self.get_logger().warning(f"no command for {s.command_timeout:g} s: ramping to v_safe = "
+                                          f"{s.v_safe:g} V")
+            u = self._plant.u_applied
+            step = s.safe_ramp_rate * s.dt
+            v = min(max(s.v_safe, u - step), u + step)
+        self._sample(v, self.get_clock().now().to_msg())
+
+    def _announce(self) -> None:
+        """Lockstep: publish sample 0 once someone listens and commands, repeat it until it is answered."""
+        if self._answered:
+            self.destroy_timer(self._timer)
+            self._timer = None
+            return
+        if self._pub.get_subscription_count() == 0 or self.count_publishers("/stage/command") == 0:
+            return
+        now = time.monotonic()
+        if now < self._announce_at:
+            return
+        self._announce_at = now + _ANNOUNCE_PERIOD
+        if self._last_msg is None:
+            self._sample(self._settings.v_safe, _time_from_ns(0))
+        else:
+            self._pub.publish(self._last_msg)
+
+    # Health ---------------------------------------------------------------------------------------------------
+    def _count(self, key: str, n: int = 1) -> None:
+        self._counts[key] += n
+
+    def _publish_diagnostics(self) -> None:
+        s, c = self._settings, self._counts
+        d = {k: c[k] - self._period_counts[k] for k in c}
+        self._period_counts = dict(c)
+        problems = []
+        if d["clip_range"] or d["clip_slew"] or d["nonfinite"]:
+            problems.append(f"clipping ({d['clip_range']} range, {d['clip_slew']} slew, {d['nonfinite']} "
+                            f"non-finite in {_DIAG_PERIOD:g} s)")
+        if self._timed_out:
+            problems.append(f"command timeout: ramping to v_safe = {s.v_safe:g} V")
+        if d["late_ticks"]:
+            problems.append(f"{d['late_ticks']} missed periods")
+        if d["bad_messages"]:
+            problems.append(f"{d['bad_messages']} malformed commands")
+        st = DiagnosticStatus()
+        st.level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
+        st.name = "hyst_sim: stage"
+        st.hardware_id = f"sim:{s.profile}"
+        st.message = "; ".join(problems) if problems else (
+            "waiting for commands" if self._cmd is None and self._k <= 1 else "ok")
+        vals = {"mode": s.mode, "rate_hz": f"{s.rate:g}", "achieved_rate_hz": f"{d['samples'] / _DIAG_PERIOD:g}",
+                "samples": c["samples"], "v_applied": f"{self._plant.u_applied:.6g}",
+                "clipped_range": c["clip_range"], "clipped_slew": c["clip_slew"],
+                "nonfinite_commands": c["nonfinite"], "malformed_commands": c["bad_messages"],
+                "stale_commands": c["stale"], "timeouts": c["timeouts"], "missed_periods": c["late_ticks"]}
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self._diag_pub.publish(arr)
+
+    @property
+    def counts(self) -> dict:
+        """Cumulative health counters (samples, clip_range, clip_slew, nonfinite, stale, timeouts...)."""
+        return dict(self._counts)
+
+
+def _time_from_ns(ns: int) -> Time:
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def main(args=None) -> int:
+    """Console script ``hyst_sim_node`` (``--ros-args -p rate:=2000.0 -p mode:=lockstep ...``)."""
+    import sys
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = SimNode()
+        try:
+            from rclpy.experimental import EventsExecutor
+            executor = EventsExecutor()
+        except ImportError:  # pragma: no cover - older rclpy
+            executor = rclpy.executors.SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (SimError, ParameterException) as err:  # bad start-up parameters: one line, no traceback
+        print(f"hyst_sim_node: {err}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

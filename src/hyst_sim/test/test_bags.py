@@ -1,0 +1,182 @@
+"""Raw bag IO, the recorder and the player: tiny bags in tmp_path, record → play round trip keeping timing."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.serialization import deserialize_message  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from hyst_sim.bagio import RawBagWriter, bag_topics, read_raw  # noqa: E402
+from hyst_sim.errors import BagError  # noqa: E402
+from hyst_sim.play_node import PlayNode  # noqa: E402
+from hyst_sim.record_node import RecordNode  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+T0 = 1_700_000_000_000_000_000
+# irregular gaps (s) so that "keeps the timing" cannot pass by accident
+TIMES = [0.0, 0.05, 0.06, 0.20, 0.45, 0.46, 0.70]
+
+
+def _ts():
+    from rosbags.typesys import Stores, get_typestore
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _state(k: int) -> bytes:
+    """Exact CDR as a subscription receives it (rclpy's serialize_message appends padding bytes)."""
+    ts = _ts()
+    T, H, JS = (ts.types[n] for n in ("builtin_interfaces/msg/Time", "std_msgs/msg/Header",
+                                      "sensor_msgs/msg/JointState"))
+    m = JS(H(T(100 + k, 1000 * k), ""), ["stage"], np.array([k * 1e-6]), np.array([], float), np.array([float(k)]))
+    return bytes(ts.serialize_cdr(m, "sensor_msgs/msg/JointState"))
+
+
+def _float(k: int) -> bytes:
+    ts = _ts()
+    return bytes(ts.serialize_cdr(ts.types["std_msgs/msg/Float64"](float(k)), "std_msgs/msg/Float64"))
+
+
+def _synthetic_bag(path: Path) -> list:
+    msgs = []
+    with RawBagWriter(path) as w:
+        w.add_topic("/stage/state", "sensor_msgs/msg/JointState")
+        w.add_topic("/stage/command", "std_msgs/msg/Float64")
+        for k, t in enumerate(TIMES):
+            topic = "/stage/state" if k % 3 else "/stage/command"
+            data = _state(k) if k % 3 else _float(k)
+            w.write(topic, T0 + int(t * 1e9), data)
+            msgs.append((topic, int(t * 1e9), data))
+    return msgs
+
+
+def test_raw_bag_round_trip_and_refusals(tmp_path):
+    bag = tmp_path / "b"
+    msgs = _synthetic_bag(bag)
+    assert (bag / "metadata.yaml").is_file() and list(bag.glob("*.mcap"))
+    assert "zstd" in (bag / "metadata.yaml").read_text() or b"zstd" in next(bag.glob("*.mcap")).read_bytes()
+    got = list(read_raw(bag))
+    assert [(m.topic, m.t_ns - T0, m.data) for m in got] == msgs
+    assert bag_topics(bag) == {"/stage/state": "sensor_msgs/msg/JointState", "/stage/command": "std_msgs/msg/Float64"}
+    assert [m.topic for m in read_raw(bag, ["/stage/command"])] == ["/stage/command"] * 3
+    with pytest.raises(BagError, match="no topic"):
+        list(read_raw(bag, ["/nope"]))
+    with pytest.raises(BagError, match="exists"):
+        RawBagWriter(bag)
+    with pytest.raises(BagError, match="no such"):
+        list(read_raw(tmp_path / "missing"))
+    with RawBagWriter(tmp_path / "c") as w, pytest.raises(BagError, match="not a standard"):
+        w.add_topic("/x", "my_pkg/msg/Custom")
+    from hyst_model.io.bag import read_state_bag                      # the analysis reader reads our bags
+    rec = read_state_bag(bag)
+    np.testing.assert_allclose(rec.y, [k * 1e-6 for k in range(len(TIMES)) if k % 3])
+
+
+def test_record_then_play_round_trip_keeps_timing(tmp_path):
+    src = tmp_path / "src"
+    msgs = _synthetic_bag(src)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    writer = RawBagWriter(tmp_path / "out")
+    rec = RecordNode(writer, ["/stage/state", "/stage/command"], context=ctx)
+    play = PlayNode(list(read_raw(src)), rate=1.0, wait_for_subscribers=10.0, delay=0.3, context=ctx)
+    try:
+        ex.add_node(rec)
+        ex.add_node(play)
+        end = time.monotonic() + 5.0                       # let the recorder discover both topics first
+        while len(rec._subs) < 2 and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        play.start()
+        end = time.monotonic() + 10.0
+        while not play.done.is_set() and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.01)
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.01)
+    finally:
+        play.stop()
+        writer.close()
+        ex.shutdown()
+        rec.destroy_node()
+        play.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    got = list(read_raw(tmp_path / "out"))
+    assert play.published == len(msgs)
+    assert sorted((m.topic, m.data) for m in got) == sorted((t, d) for t, _, d in msgs)
+    by_data = {m.data: m.t_ns for m in got}
+    t_rec = np.array([by_data[d] for _, _, d in msgs], dtype=float) * 1e-9
+    t_orig = np.array([t for _, t, _ in msgs], dtype=float) * 1e-9
+    dev = (t_rec - t_rec[0]) - (t_orig - t_orig[0])
+    assert np.max(np.abs(dev)) < 0.03, dev                   # the 10 ms and 250 ms gaps survive
+    js = deserialize_message(got[[m.topic for m in got].index("/stage/state")].data, JointState)
+    assert js.name == ["stage"]
+
+
+def test_player_rate_factor_and_loop(tmp_path):
+    src = tmp_path / "src"
+    _synthetic_bag(src)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        fast = PlayNode(list(read_raw(src)), rate=4.0, context=ctx)
+        t = time.monotonic()
+        fast.start()
+        assert fast.done.wait(5.0)
+        took = time.monotonic() - t
+        assert fast.published == len(TIMES) and 0.7 / 4 - 0.01 < took < 0.7 / 4 + 0.5
+        looping = PlayNode(list(read_raw(src)), rate=10.0, loop=True, context=ctx)
+        looping.start()
+        time.sleep(0.5)
+        looping.stop()
+        assert looping.published > 2 * len(TIMES)
+        with pytest.raises(BagError):
+            PlayNode([], context=ctx)
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_recorder_process_finalises_the_bag_on_signal(tmp_path, sig):
+    exe = Path(sys.executable).with_name("hyst_bag_record")
+    out = tmp_path / "rec"
+    proc = subprocess.Popen([str(exe), "/stage/state", "-o", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=dict(os.environ))
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("pub", context=ctx)
+    pub = node.create_publisher(JointState, "/stage/state", 10)
+    try:
+        end = time.monotonic() + 15.0
+        k = 0
+        while time.monotonic() < end and (k < 50 or pub.get_subscription_count() == 0):
+            if pub.get_subscription_count():
+                m = JointState()
+                m.name, m.position, m.effort = ["stage"], [k * 1e-9], [0.0]
+                pub.publish(m)
+                k += 1
+            time.sleep(0.01)
+        time.sleep(0.2)
+        proc.send_signal(sig)
+        out_text, err_text = proc.communicate(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert proc.returncode == 0, err_text.decode()
+    assert b"messages" in out_text
+    got = list(read_raw(out))
+    assert 30 <= len(got) <= k
+    assert (out / "metadata.yaml").is_file()
+    existing = subprocess.run([str(exe), "/stage/state", "-o", str(out)], capture_output=True, timeout=30)
+    assert existing.returncode == 2 and b"exists" in existing.stderr and b"Traceback" not in existing.stderr
