@@ -31,19 +31,22 @@ def excitation(rate: float = RATE, duration: float = DURATION) -> tuple[np.ndarr
     """Commanded voltage (V) of the identification experiment: steps/holds and sines, within 0–150 V."""
     t = np.arange(int(round(duration * rate))) / rate
     u = np.zeros_like(t)
+    k = duration / DURATION  # the schedule below is written for 40 s and stretched to ``duration``
 
     def steps(t0, t1, levels):
+        t0, t1 = k * t0, k * t1
         seg = (t1 - t0) / len(levels)
         for i, lv in enumerate(levels):
             u[(t >= t0 + i * seg) & (t < t0 + (i + 1) * seg)] = lv
 
     def sines(t0, t1, parts):
+        t0, t1 = k * t0, k * t1
         seg = (t1 - t0) / len(parts)
         for i, (f, a) in enumerate(parts):
             m = (t >= t0 + i * seg) & (t < t0 + (i + 1) * seg)
             u[m] = 75.0 - a * np.cos(2 * np.pi * f * (t[m] - t0 - i * seg))
 
-    # Sine segments start and end at 75 - a (a whole number of periods), so each joins with one small step.
+    # Sine segments (whole periods at 40 s) start and end at 75 - a, so each joins with one small step.
     steps(0, 10, [0, 60, 120, 30, 150])
     sines(10, 20, [(0.4, 70), (2, 50), (4.8, 30), (10, 20)])
     steps(20, 25, [0, 100])

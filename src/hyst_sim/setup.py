@@ -11,7 +11,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
     ],
-    package_data={'hyst_sim': ['data/*.yaml', 'data/*.md']},
+    package_data={'hyst_sim': ['data/*.yaml', 'data/*.md', 'data/scenarios/*.yaml']},
     install_requires=['numpy'],
     zip_safe=True,
     maintainer='hyst developers',

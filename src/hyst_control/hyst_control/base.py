@@ -190,6 +190,16 @@ class BaseController:
         return {"error": self._y_prev - self._r_prev, "u": self._u_prev, "k": float(self._k),
                 "saturated": float(self._saturated), "bad_inputs": float(self._bad_inputs)}
 
+    def sync_applied(self, u_applied: float) -> None:
+        """Take the voltage the amplifier actually applied for the newest sample (``effort[0]`` of the state)
+        as u_{k−1}: when a command arrived late the stage ran on an older one, and (4.12)/(5.23) must continue
+        from what really happened."""
+        if math.isfinite(u_applied) and self._u_prev == self._u_prev:
+            self._u_prev = float(u_applied)
+
+    def notice_gap(self) -> None:
+        """The newest sample does not follow the previous one (missed states); adaptive laws skip it."""
+
     # -- helpers --------------------------------------------------------------------------------------------
     @property
     def last_command(self) -> float:

@@ -7,6 +7,7 @@ Example::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -34,15 +35,41 @@ def register(subparsers) -> None:
     p.add_argument("--initial", default="model", help="DMRAC initial estimates: model, cs0, cs1, cs2, cs3")
     p.add_argument("--thesis-rate", action="store_true",
                    help="DPPC/DMRAC: use the reference rate r_u (4.3)/(5.4) instead of the exact input rate")
+    p.add_argument("--gain", action="append", default=[], metavar="NAME=VALUE",
+                   help="set one gain of the algorithm (repeatable), e.g. --gain kappa1=0.5 --gain a_m=0.3; names "
+                        "as the controller node's <algorithm>.<name> parameters")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
+
+
+def _gains(args: argparse.Namespace, classes: dict):
+    """The algorithm's gains with ``--gain`` overrides and ``--thesis-rate`` applied (None = defaults)."""
+    cls = classes.get(args.algorithm)
+    if cls is None:
+        if args.gain:
+            raise ConfigError(f"{args.algorithm} has no gains to set")
+        return None
+    kw: dict = {}
+    names = {f.name: f.type for f in dataclasses.fields(cls)}
+    for item in args.gain:
+        name, _, value = item.partition("=")
+        if name not in names:
+            raise ConfigError(f"--gain {item!r}: {args.algorithm} gains are {', '.join(names)}")
+        try:
+            kw[name] = value.lower() in ("1", "true", "yes") if names[name] in (bool, "bool") else float(value)
+        except ValueError:
+            raise ConfigError(f"--gain {item!r}: a number is expected") from None
+    if args.thesis_rate and "exact_rate" in names:
+        kw["exact_rate"] = False
+    return cls(**kw) if kw else None
 
 
 def run(args: argparse.Namespace) -> int:
     from hyst_model.core import pea_default  # noqa: PLC0415
     from .dmrac import DMRACGains  # noqa: PLC0415
     from .dppc import DPPCGains  # noqa: PLC0415
+    from .pid import PIDGains  # noqa: PLC0415
 
     if not (math.isfinite(args.seconds) and 0 < args.seconds <= 600):
         raise ConfigError("--seconds must be in (0, 600]")
@@ -50,11 +77,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--rate must be in [10, 20000] Hz")
     ref = parse_reference(args.reference)
     model = mismatched(pea_default(), args.mismatch) if args.mismatch else pea_default()
-    gains = None
-    if args.thesis_rate and args.algorithm == "dppc":
-        gains = DPPCGains(exact_rate=False)
-    elif args.thesis_rate and args.algorithm == "dmrac":
-        gains = DMRACGains(exact_rate=False)
+    gains = _gains(args, {"dppc": DPPCGains, "dmrac": DMRACGains, "pid": PIDGains})
     ctrl = make_controller(args.algorithm, model, 1.0 / args.rate, gains=gains, initial=args.initial)
     res = run_closed_loop(ctrl, ref, args.seconds, plant=default_plant(rate=args.rate, seed=args.seed))
     out = res.summary()

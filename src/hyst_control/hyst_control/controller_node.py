@@ -7,7 +7,7 @@ stamp of the state sample it answers), ``/controller/state`` (named scalars: err
 
 The command answering the state stamped t_k acts at the next sample, so the reference is evaluated at
 t_k + 1/rate: the newest reference sample is extrapolated with its rate from its own stamp (at most 50 ms; both
-stamps come from the same clock in realtime operation). Parameters: ``algorithm`` (bumpless switch at run time),
+stamps come from the same clock in realtime operation; at most 5 ms ahead). Parameters: ``algorithm`` (bumpless switch at run time),
 per-algorithm gains ``dppc.*``, ``dmrac.*``, ``pid.*`` (ranges declared, consistency checked in the on-set
 callback), limits ``v_min``/``v_max``/``slew_max``/``v_safe``, ``watchdog_periods`` and the stage model
 ``model.*`` (from ``--ros-args --params-file P``; the identification node may push new values at run time).
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -29,13 +29,14 @@ from sensor_msgs.msg import JointState
 
 from hyst_model.core import PARAM_NAMES, MBWParams, pea_default
 
-from .base import hand_over
+from .base import check_model, hand_over
 from .dmrac import TABLE53, DMRACGains
 from .dppc import DPPCGains
 from .errors import ControlError
 from .limits import GMA_LIMITS, PEA_LIMITS, CommandLimits
 from .loop import ALGORITHMS, make_controller
 from .pid import PIDGains
+from .reference import Reference, parse_reference
 
 __all__ = ["ControllerNode", "ControllerSettings", "main"]
 
@@ -86,9 +87,19 @@ class ControllerSettings:
     dmrac_initial: str
     pid: PIDGains
     model: MBWParams
+    reference: Reference | None = None
 
     def gains(self, algorithm: str):
         return getattr(self, algorithm) if algorithm in _GAINS else None
+
+
+def _profile_model(profile: str) -> MBWParams:
+    """The sim's default stage model for a profile (the embedded default when hyst_sim is absent)."""
+    try:
+        from hyst_sim.profiles import get_profile  # noqa: PLC0415 - sibling package, numerical core
+        return get_profile(profile).model()
+    except Exception:  # noqa: BLE001 - unknown profile is reported by the limits, the model falls back
+        return pea_default()
 
 
 def _fp(lo, hi):
@@ -107,7 +118,12 @@ class ControllerNode(Node):
         self._ref = None  # (t_stamp, r, rdot)
         self._last_state_wall = None
         self._tripped = False
-        self._n = dict.fromkeys(("states", "commands", "bad_states", "bad_refs", "watchdog_trips", "switches"), 0)
+        self._n = dict.fromkeys(("states", "commands", "bad_states", "bad_refs", "watchdog_trips", "switches", "gaps"), 0)
+        self._t_last = None  # stamp of the previous state
+        self._t0 = None  # first state stamp (internal reference time origin)
+        self._pending = math.nan  # reference targeted by the last command: compared with the next sample
+        self._skip = 0            # samples after a (re)start or switch left out of the tracking statistics
+        self._stats: dict[str, list] = {}  # algorithm -> [n, sum e², max |e|]
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         self._cmd_pub = self.create_publisher(JointState, "/stage/command", 10)
@@ -135,6 +151,9 @@ class ControllerNode(Node):
         d("watchdog_periods", 100, ParameterDescriptor(
             description="no state for this many periods -> v_safe", integer_range=[IntegerRange(
                 from_value=2, to_value=1_000_000, step=1)]))
+        d("reference", "", ParameterDescriptor(
+            description="'' = follow /stage/reference; a spec (sine:5, step, c1, ...) = generate it internally "
+                        "at the state stamps (deterministic, e.g. with a lockstep sim); time 0 = first state"))
         d("state_decimation", 10, ParameterDescriptor(
             description="publish /controller/state every N samples", integer_range=[IntegerRange(
                 from_value=1, to_value=100_000, step=1)]))
@@ -144,8 +163,11 @@ class ControllerNode(Node):
                     ParameterDescriptor(description=txt, floating_point_range=_fp(lo, hi))
                 d(f"{alg}.{name}", default, desc)
         d("dmrac.initial", "model", ParameterDescriptor(description="initial estimates: model | cs0..cs3 (Table 5.3)"))
-        m = pea_default()
+        m = _profile_model(self.get_parameter("profile").value)
         d("model.base", "mbw", ParameterDescriptor(description="base model of the params file (controllers need mbw)"))
+        d("model.dt", 0.0, ParameterDescriptor(
+            description="sample period the model was identified at (s); 0 = unknown; must equal 1/rate",
+            floating_point_range=_fp(0.0, 1.0)))
         for key in _MODEL_KEYS:
             d(f"model.{key}", _F(getattr(m, key)), ParameterDescriptor(
                 description=f"stage model {key} (params file; thesis ν convention)",
@@ -161,16 +183,21 @@ class ControllerNode(Node):
             raise ControlError(f"algorithm must be one of {', '.join(ALGORITHMS)}, got {alg!r}")
         if str(get("model.base")) != "mbw":
             raise ControlError("the controllers invert the MBW model: model.base must be 'mbw'")
+        mdt, rate = _F(get("model.dt")), _F(get("rate"))
+        if mdt > 0 and abs(mdt * rate - 1.0) > 1e-6:
+            raise ControlError(f"the model was identified at dt = {mdt:g} s but rate = {rate:g} Hz: the MBW recursion "
+                               f"is per sample, so set rate:={1.0 / mdt:g} (or refit the model at this rate)")
         init = str(get("dmrac.initial")).lower()
         if init != "model" and init not in TABLE53:
             raise ControlError("dmrac.initial must be model, cs0, cs1, cs2 or cs3")
         gains = {a: cls(**{n: get(f"{a}.{n}") for n in spec}) for a, (cls, spec) in _GAINS.items()}
-        model = MBWParams(**{k: _F(get(f"model.{k}")) for k in _MODEL_KEYS})
+        model = check_model(MBWParams(**{k: _F(get(f"model.{k}")) for k in _MODEL_KEYS}))  # whatever runs now
         s = ControllerSettings(
             algorithm=alg, rate=_F(get("rate")),
             limits=CommandLimits(_F(get("v_min")), _F(get("v_max")), _F(get("slew_max")), _F(get("v_safe"))),
             watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
-            dmrac_initial=init, model=model, **gains)
+            dmrac_initial=init, model=model,
+            reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, **gains)
         make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init)  # checks the model too
         return s
 
@@ -187,6 +214,8 @@ class ControllerNode(Node):
         c = self._ctrl
         if c is None:
             return
+        if new.reference != old.reference:
+            self._t0 = None
         if new.algorithm != old.algorithm or new.rate != old.rate or new.dmrac_initial != old.dmrac_initial:
             self._switch(new)
             return
@@ -201,6 +230,7 @@ class ControllerNode(Node):
         new = make_controller(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial)
         self._ctrl = hand_over(new, self._ctrl, self._y) if math.isfinite(self._y) else None
         self._n["switches"] += 1
+        self._skip = int(0.25 * s.rate)
         self.get_logger().info(f"switched to {s.algorithm} (bumpless)")
 
     # Messages -------------------------------------------------------------------------------------------
@@ -213,11 +243,18 @@ class ControllerNode(Node):
         self._ref = (t, _F(msg.position[0]), _F(v))
 
     def _target(self, t_state: float, y: float) -> float:
+        gen = self._settings.reference
+        if gen is not None:
+            if self._t0 is None:
+                self._t0 = t_state
+            return gen(t_state + 1.0 / self._settings.rate - self._t0)
         if self._ref is None:
             return self._ctrl.last_reference if self._ctrl is not None else y  # hold where the stage is
         t_ref, r, v = self._ref
-        lead = t_state + 1.0 / self._settings.rate - t_ref
-        return r + v * lead if abs(lead) <= 0.05 else r
+        # Linear extrapolation is only good for a few ms (a 5 Hz, 10 µm sine bends by 12 µm in 50 ms): a stale
+        # reference is extrapolated by at most 5 ms.
+        lead = min(max(t_state + 1.0 / self._settings.rate - t_ref, 0.0), 0.005)
+        return r + v * lead
 
     def _on_state(self, msg: JointState) -> None:
         self._last_state_wall = time.monotonic()
@@ -235,12 +272,31 @@ class ControllerNode(Node):
         if self._ctrl is None or self._tripped:
             u0 = _F(msg.effort[0]) if msg.effort and math.isfinite(msg.effort[0]) else s.limits.v_safe
             c = make_controller(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial)
-            c.reset(y, u0, self._target(t, y) if self._ref is not None else y)
+            c.reset(y, u0, y if self._ref is None and s.reference is None else self._target(t, y))
             self._ctrl = c
+            self._skip = int(0.25 * s.rate)
+            self._pending = math.nan
             if self._tripped:
                 self.get_logger().info("states are back: controller restarted bumplessly")
             self._tripped = False
-        u = self._ctrl.step(self._target(t, y), y)
+        else:
+            if msg.effort and math.isfinite(msg.effort[0]):
+                self._ctrl.sync_applied(_F(msg.effort[0]))
+            if self._t_last is not None and t - self._t_last > 1.5 / s.rate:
+                self._ctrl.notice_gap()
+                self._n["gaps"] += 1
+        self._t_last = t
+        if self._skip > 0:
+            self._skip -= 1
+        elif math.isfinite(self._pending):
+            e = y - self._pending
+            st = self._stats.setdefault(s.algorithm, [0, 0.0, 0.0])
+            st[0] += 1
+            st[1] += e * e
+            st[2] = max(st[2], abs(e))
+        r = self._target(t, y)
+        self._pending = r
+        u = self._ctrl.step(r, y)
         self._publish_command(msg.header.stamp, u)
         if self._n["commands"] % s.state_decimation == 0:
             st = self._ctrl.state()
@@ -285,6 +341,9 @@ class ControllerNode(Node):
         vals = dict(self._n, algorithm=self._settings.algorithm)
         if self._ctrl is not None:
             vals.update(saturated=int(self._ctrl.state().get("saturated", 0)))
+        for a, m in self.tracking_summary().items():
+            vals[f"rmse_{a}"] = f"{m['rmse']:.3e}"
+            vals[f"mae_{a}"] = f"{m['mae']:.3e}"
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
@@ -295,22 +354,37 @@ class ControllerNode(Node):
     def counts(self) -> dict:
         return dict(self._n)
 
+    def tracking_summary(self) -> dict:
+        """Per algorithm: samples, RMSE and MAE (m) of y_k against the reference targeted for sample k,
+        excluding 0.25 s after each start or switch."""
+        return {a: {"samples": n, "rmse": math.sqrt(s2 / n) if n else math.nan, "mae": mx}
+                for a, (n, s2, mx) in self._stats.items()}
+
 
 def main(args=None) -> int:
     """Console script ``hyst_controller_node`` (``--ros-args -p algorithm:=dmrac --params-file P``)."""
+    import argparse
     import sys
 
+    from rclpy.utilities import remove_ros_args
+
+    ap = argparse.ArgumentParser(prog="hyst_controller_node", description=__doc__.split("\n\n")[0],
+                                 epilog="parameters: --ros-args -p NAME:=VALUE (see the module docs / README)")
+    ap.parse_args(remove_ros_args(args=sys.argv if args is None else args)[1:])
     rclpy.init(args=args)
     node = None
     try:
         node = ControllerNode()
+        # EventsExecutor driven by spin_once: its spin() neither leaves on SIGINT/SIGTERM nor (in this rclpy)
+        # reliably runs timers; spin_once does both and keeps the per-message overhead low.
         try:
             from rclpy.experimental import EventsExecutor
             executor = EventsExecutor()
         except ImportError:  # pragma: no cover - older rclpy
             executor = rclpy.executors.SingleThreadedExecutor()
         executor.add_node(node)
-        executor.spin()
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ControlError, ValueError) as err:

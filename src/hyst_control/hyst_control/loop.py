@@ -20,13 +20,13 @@ from hyst_model.core import MBWParams
 from .base import BaseController
 from .dmrac import DMRAC, DMRACGains
 from .dppc import DPPC, DPPCGains
-from .errors import ConfigError, LoopError
+from .errors import ConfigError, ControlError, LoopError
 from .limits import PEA_LIMITS, CommandLimits
 from .pid import PID, OpenLoop, PIDGains
 from .reference import Reference, parse_reference
 
 __all__ = ["ALGORITHMS", "LoopResult", "make_controller", "mismatched", "run_closed_loop", "default_plant",
-           "SimPlant"]
+           "SimPlant", "parse_schedule"]
 
 ALGORITHMS = ("dppc", "dmrac", "pid", "open_loop")
 
@@ -44,6 +44,21 @@ def make_controller(algorithm: str, model: MBWParams, dt: float, limits: Command
     if algorithm == "open_loop":
         return OpenLoop(model, dt, limits)
     raise ConfigError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(ALGORITHMS)}")
+
+
+def parse_schedule(text: str) -> list[tuple[str, float]]:
+    """``'dppc:3,pid:2'`` → ``[('dppc', 3.0), ('pid', 2.0)]``; raises ControlError with the accepted form."""
+    out = []
+    for item in filter(None, (x.strip() for x in text.split(","))):
+        alg, _, sec = item.partition(":")
+        try:
+            dur = float(sec)
+        except ValueError:
+            raise ControlError(f"schedule entry {item!r}: use ALGORITHM:SECONDS, e.g. dppc:3") from None
+        if alg not in ALGORITHMS or not dur > 0:
+            raise ControlError(f"schedule entry {item!r}: algorithm in {', '.join(ALGORITHMS)}, seconds > 0")
+        out.append((alg, dur))
+    return out
 
 
 def mismatched(model: MBWParams, fraction: float) -> MBWParams:

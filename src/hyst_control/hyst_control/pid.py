@@ -129,6 +129,9 @@ class OpenLoop(ModelBased):
         self._uff = 0.0
         self._bump = math.nan
 
+    def sync_applied(self, u_applied: float) -> None:
+        """Open loop follows its own model, not the measured side: nothing to synchronise."""
+
     def _on_reset(self, y0: float, u0: float, r0: float) -> None:
         self._ym_state = self._ym(y0)
         self._uff = u0

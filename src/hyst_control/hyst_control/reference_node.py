@@ -94,8 +94,14 @@ class ReferenceNode(Node):
 
 def main(args=None) -> int:
     """Console script ``hyst_reference_node`` (``--ros-args -p shape:=sine -p frequency:=5.0``)."""
+    import argparse
     import sys
 
+    from rclpy.utilities import remove_ros_args
+
+    ap = argparse.ArgumentParser(prog="hyst_reference_node", description=__doc__.split("\n\n")[0],
+                                 epilog="parameters: --ros-args -p NAME:=VALUE (see the module docs / README)")
+    ap.parse_args(remove_ros_args(args=sys.argv if args is None else args)[1:])
     rclpy.init(args=args)
     node = None
     try:

@@ -21,7 +21,19 @@ def test_track_pid_is_worse_than_dppc_at_30_hz(capsys):
     assert res["pid"] > 10 * res["dppc"]
 
 
+def test_gain_overrides_reproduce_table_5_6_trend_from_cs3(capsys):
+    """Thesis Table 5.6: from CS3 on Case 3, κ = 0.5 tracks far better than κ = 0.01."""
+    rmse = {}
+    for k in ("0.01", "0.5"):
+        assert main(["track", "--algorithm", "dmrac", "--initial", "cs3", "--reference", "case3", "--seconds", "2",
+                     "--gain", f"kappa1={k}", "--gain", f"kappa2={k}", "--json"]) == 0
+        rmse[k] = json.loads(capsys.readouterr().out)["rmse"]
+    assert rmse["0.5"] < 0.2 * rmse["0.01"]
+
+
 @pytest.mark.parametrize("argv", [["track", "--reference", "sine"], ["track", "--seconds", "-1"],
+                                  ["track", "--gain", "chi=2"], ["track", "--gain", "nope=1"],
+                                  ["track", "--algorithm", "open_loop", "--gain", "ki=1"],
                                   ["track", "--mismatch", "3"], ["track", "--algorithm", "dmrac", "--initial", "x"]])
 def test_bad_input_is_one_line_and_exit_2(argv, capsys):
     assert main(argv) == 2

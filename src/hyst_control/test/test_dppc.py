@@ -119,3 +119,16 @@ def test_bad_gains_rejected():
     for kw in (dict(lambda0=1e-7), dict(omega=1.5), dict(chi=1.0), dict(h_lower=0), dict(funnel_margin=1)):
         with pytest.raises(ConfigError):
             DPPCGains(**kw)
+
+
+def test_reference_rate_substitution_4_3_costs_accuracy_that_grows_with_frequency():
+    """Thesis fact: replacing v_u by r_u (4.3) is an error source that grows with frequency; the exact input-rate
+    inversion removes it (noise floor at every frequency)."""
+    def rmse(f, exact):
+        c = DPPC(pea_default(), 5e-4, DPPCGains(exact_rate=exact))
+        return run_closed_loop(c, f"sine:{f}", 0.5, plant=default_plant(2000.0)).rmse
+
+    thesis = [rmse(f, False) for f in (1, 10, 30)]
+    exact = [rmse(f, True) for f in (1, 10, 30)]
+    assert thesis[0] < thesis[1] < thesis[2] and thesis[2] > 3 * thesis[0]
+    assert max(exact) < 1.2 * min(exact) and max(exact) < 4e-9

@@ -22,11 +22,13 @@ __all__ = ["Adapter", "AsciiAdapter", "GcsAdapter", "Reading", "Identified", "De
 
 @dataclass(frozen=True)
 class Reading:
-    """One sensor sample in SI: displacement (m), voltage the amplifier applies (V), optional sequence number."""
+    """One sensor sample in SI: displacement (m), voltage the amplifier applies (V), optional sequence number and
+    device clock (s, wrapping; None when the protocol has no time stamp)."""
 
     position_m: float
     applied_v: float
     seq: int | None = None
+    device_time: float | None = None
 
 
 @dataclass(frozen=True)
@@ -47,8 +49,8 @@ class DeviceFault:
 
 @dataclass(frozen=True)
 class BadFrame:
-    """A received line was rejected: ``kind`` is ``checksum``, ``syntax``, ``overlong``, ``unexpected`` or
-    ``implausible``."""
+    """A received line was rejected: ``kind`` is ``checksum``, ``syntax``, ``garbage``, ``partial``, ``overlong``,
+    ``unexpected`` or ``implausible``."""
 
     kind: str
     detail: str
@@ -186,9 +188,11 @@ class AsciiAdapter(Adapter):
         for line in lines:
             if not line.strip():
                 continue
+            start = line.rfind(b"$")
             if not line.startswith(b"$"):  # noise before a frame start: reported, the frame may still be good
-                start = line.rfind(b"$")
                 events.append(BadFrame("garbage", f"{len(line) if start < 0 else start} bytes outside frames"))
+            elif start > 0:  # a frame cut short, then the next one: the cut one is lost (and reported)
+                events.append(BadFrame("partial", f"truncated frame {line[:min(start, 30)]!r}"))
             try:
                 msg = hdb.decode_reply(line)
             except ChecksumError as err:
@@ -205,7 +209,7 @@ class AsciiAdapter(Adapter):
                 if self._last_seq is not None and msg.seq != self._last_seq:  # equal: a re-read (RP), no gap
                     self.lost_samples += (msg.seq - self._last_seq - 1) % 0x10000
                 self._last_seq = msg.seq
-                events.append(Reading(msg.counts * self.counts_to_m, v, msg.seq))
+                events.append(Reading(msg.counts * self.counts_to_m, v, msg.seq, msg.t_us * 1e-6))
             elif isinstance(msg, hdb.Identity):
                 events.append(Identified(f"{msg.vendor},{msg.model},{msg.serial},{msg.firmware}"))
             elif isinstance(msg, hdb.ErrorReply):
@@ -280,6 +284,15 @@ class GcsAdapter(Adapter):
             self._pending.clear()
         for line in lines:
             if not line.strip():
+                continue
+            if line.strip().lstrip(b"-").isdigit():
+                # A bare integer can only answer ERR?: take it even out of order (late after a busy spell),
+                # because the device cleared its latched error when it answered — dropping it would lose it.
+                if "ERR?" in self._pending:
+                    self._pending.remove("ERR?")
+                code = int(line)
+                if code != 0:
+                    events.append(DeviceFault(code, gcs.ERROR_CODES.get(code, "error"), severe=code >= 1000))
                 continue
             if not self._pending:
                 events.append(BadFrame("unexpected", f"reply {line[:30]!r} to no query"))

@@ -1,17 +1,20 @@
 """hyst_driver_node: the real stage behind the same topics and parameters as the sim.
 
-Publishes ``/stage/state`` (JointState: ``position[0]`` m, ``effort[0]`` applied V, ``header.stamp`` = time the
-sample arrived) and ``/diagnostics``; subscribes ``/stage/command`` (``effort[0]`` V). All serial work happens
-in one I/O thread (:class:`hyst_driver.transport.DeviceLink`): commands wake it at once, samples are published
-from it as they arrive, a lost port is reopened with backoff. Voltages leave only through the limiter
-(:mod:`hyst_driver.safety`); when commands stop for ``command_timeout`` and on shutdown the output ramps to
-``v_safe`` at ``slew_max``.
+Publishes ``/stage/state`` (JointState: ``position[0]`` m, ``effort[0]`` applied V, ``header.stamp`` = sample
+time: the device's sample clock mapped onto the node clock, or the arrival time for protocols without one) and
+``/diagnostics`` (link state, bad frames, device errors, timeouts, reconnects, clipping, watchdog, loop latency);
+subscribes ``/stage/command`` (``effort[0]`` V; ``header.stamp`` = the state it answers). All serial work
+happens in one I/O thread (:class:`hyst_driver.transport.DeviceLink`): commands wake it at once, samples are
+published from it as they arrive, a lost port is reopened with backoff. Voltages leave only through the limiter
+(:mod:`hyst_driver.safety`); when commands stop for ``command_timeout``, and on shutdown, the output ramps to
+``v_safe`` at ``safe_ramp_rate``.
 """
 from __future__ import annotations
 
-import math
+import signal
 import sys
 import threading
+from collections import deque
 from dataclasses import dataclass, replace
 
 import rclpy
@@ -20,6 +23,8 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 from hyst_sim.profiles import get_profile
@@ -78,6 +83,42 @@ def _fp(lo: float, hi: float) -> list[FloatingPointRange]:
     return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
+def param_table(prof) -> list[tuple[str, object, tuple | None, str]]:
+    """``(name, default, range, description)`` of every parameter but ``profile``: the one table behind the
+    declarations and ``--help``. Limits default to, and are ranged by, the profile (:mod:`hyst_sim.profiles`)."""
+    lo, hi = prof.v_min, prof.v_max
+    return [
+        ("port", "", None, "serial device or pty path (a stable /dev/serial/by-id/... link survives replugs)"),
+        ("baud", 921600, (1200, 4000000), "UART baud rate (ignored by USB-CDC and ptys)"),
+        ("protocol", "ascii", None, "device protocol: ascii (HDB/1, streamed, CRC-8) | gcs (GCS-like, polled)"),
+        ("rate", 1000.0, (1.0, 2000.0), "sample rate, Hz (HDB/1 streams at the nearest integer)"),
+        ("counts_to_m", prof.sensor_resolution, (1e-12, 1e-3), "metres per sensor count (ascii; gcs reports um)"),
+        ("v_min", lo, (lo, hi), "lowest voltage ever sent, V"),
+        ("v_max", hi, (lo, hi), "highest voltage ever sent, V"),
+        ("slew_max", prof.slew_max, (1e-3, 1e9), "largest voltage rate ever sent, V/s"),
+        ("command_timeout", 0.2, (1e-3, 3600.0), "no command for this long (s): ramp to v_safe"),
+        ("v_safe", prof.v_safe, (lo, hi), "voltage ramped to when commands stop and on shutdown, V"),
+        ("safe_ramp_rate", 100.0, (1e-3, 1e9), "rate of the ramps to v_safe, V/s (never above slew_max)"),
+        ("link_timeout", 0.5, (0.005, 60.0), "no sample for this long (s): close the port and reconnect"),
+        ("frame_id", "stage", None, "header.frame_id of /stage/state"),
+    ]
+
+
+def usage() -> str:
+    """``--help`` text: what the node does and every parameter with default and range (PEA; GMA differs)."""
+    from hyst_sim.profiles import GMA, PEA
+
+    lines = ["usage: hyst_driver_node --ros-args -p port:=PATH [-p NAME:=VALUE ...]", "",
+             __doc__.strip(), "", "parameters (defaults for profile pea; gma: v_min -5, v_max 5, v_safe 0, "
+             f"slew_max {GMA.slew_max:g}):", "  profile          pea | gma (read-only)"]
+    for name, default, rng, text in param_table(PEA):
+        r = f" [{rng[0]:g} .. {rng[1]:g}]" if rng else ""
+        lines.append(f"  {name:<16} {default!r}{r}  {text}")
+    lines += ["", "without hardware: hyst_emulator prints a port path to use; protocols: see "
+              "hyst_driver.protocol_ascii / protocol_gcs"]
+    return "\n".join(lines)
+
+
 class DriverNode(Node):
     """Serial driver for the PEA/GMA amplifier and displacement sensor (see module docstring)."""
 
@@ -86,37 +127,18 @@ class DriverNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("hyst_driver", **kwargs)
-        d = ParameterDescriptor
-        self.declare_parameter("profile", "pea", d(description="actuator profile: pea (0..150 V) | gma (+-5 V); "
-                                                               "sets the defaults and ranges of the limits",
-                                                   read_only=True))
+        self.declare_parameter("profile", "pea", ParameterDescriptor(
+            description="actuator profile: pea (0..150 V) | gma (+-5 V); sets the limits' defaults and ranges",
+            read_only=True))
         prof = get_profile(self.get_parameter("profile").value)  # ConfigError for a bad name → main()
         lo, hi = prof.v_min, prof.v_max
-        self.declare_parameter("port", "", d(description="serial device or pty path (stable /dev/serial/by-id/... "
-                                                         "link recommended)"))
-        self.declare_parameter("baud", 921600, d(description="UART baud rate (ignored by USB-CDC and ptys)",
-                                                 integer_range=[IntegerRange(from_value=1200, to_value=4000000,
-                                                                             step=1)]))
-        self.declare_parameter("protocol", "ascii", d(description="device protocol: ascii (HDB/1, streamed, "
-                                                                  "CRC-8) | gcs (GCS-like, polled)"))
-        self.declare_parameter("rate", 1000.0, d(description="sample rate, Hz", floating_point_range=_fp(1, 2000)))
-        self.declare_parameter("counts_to_m", prof.sensor_resolution,
-                               d(description="metres per sensor count (ascii protocol; gcs reports um)",
-                                 floating_point_range=_fp(1e-12, 1e-3)))
-        self.declare_parameter("v_min", lo, d(description="lowest voltage ever sent, V", floating_point_range=_fp(lo, hi)))
-        self.declare_parameter("v_max", hi, d(description="highest voltage ever sent, V", floating_point_range=_fp(lo, hi)))
-        self.declare_parameter("slew_max", prof.slew_max, d(description="largest voltage rate, V/s",
-                                                            floating_point_range=_fp(1e-3, 1e9)))
-        self.declare_parameter("command_timeout", 0.2, d(description="no command for this long (s): ramp to v_safe",
-                                                         floating_point_range=_fp(1e-3, 3600)))
-        self.declare_parameter("v_safe", prof.v_safe, d(description="voltage ramped to when commands stop and on "
-                                                                    "shutdown, V", floating_point_range=_fp(lo, hi)))
-        self.declare_parameter("safe_ramp_rate", 100.0, d(description="rate of the ramp to v_safe (watchdog, "
-                                                                       "shutdown), V/s; capped at slew_max",
-                                                          floating_point_range=_fp(1e-3, 1e9)))
-        self.declare_parameter("link_timeout", 0.5, d(description="no sample for this long (s): reconnect",
-                                                      floating_point_range=_fp(0.005, 60)))
-        self.declare_parameter("frame_id", "stage", d(description="header.frame_id of /stage/state"))
+        for name, default, rng, text in param_table(prof):
+            desc = ParameterDescriptor(description=text)
+            if isinstance(default, int):
+                desc.integer_range = [IntegerRange(from_value=rng[0], to_value=rng[1], step=1)]
+            elif isinstance(default, float):
+                desc.floating_point_range = _fp(*rng)
+            self.declare_parameter(name, default, desc)
         self.cfg = self._read_config({}).validate()
         self.add_on_set_parameters_callback(self._on_set)
 
@@ -129,6 +151,8 @@ class DriverNode(Node):
         self.create_subscription(JointState, "/stage/command", self._on_command, 10)
         self.create_timer(1.0, self._publish_diagnostics)
         self.bad_commands = 0
+        self.io_errors = 0
+        self._latency: deque[int] = deque(maxlen=2000)  # ns, sample time -> command arrival
         self._stop = threading.Event()
         self._io = threading.Thread(target=self._io_loop, name="hyst_driver_io", daemon=True)
         self._io.start()
@@ -163,22 +187,37 @@ class DriverNode(Node):
             self.bad_commands += 1  # a malformed message is counted, never fatal; the watchdog still runs
             return
         self.link.command(float(msg.effort[0]))
+        st = msg.header.stamp
+        if st.sec or st.nanosec:  # answers a state sample: sample time -> command arrival is the loop latency
+            self._latency.append(self.get_clock().now().nanoseconds - (st.sec * 1_000_000_000 + st.nanosec))
 
     def _io_loop(self) -> None:
         link, clock = self.link, self.get_clock()
         while not self._stop.is_set():
-            link.wait(link.next_deadline() - link.clock())
-            for _t, r in link.service():
-                msg = JointState()
-                msg.header.stamp = clock.now().to_msg()
-                msg.header.frame_id = self.cfg.frame_id
-                msg.name = ["stage"]
-                msg.position = [r.position_m]
-                msg.effort = [r.applied_v]
-                try:
-                    self.pub_state.publish(msg)
-                except Exception:  # context shutting down under us: the main thread ends the loop
+            try:
+                link.wait(link.next_deadline() - link.clock())
+                readings = link.service()
+                if readings:
+                    self._publish_states(readings, clock)
+            except Exception as err:  # a bug must not silently end the I/O (the watchdog ramp lives here)
+                self.io_errors += 1
+                if self.io_errors == 1 or self.io_errors % 1000 == 0:
+                    self.get_logger().error(f"I/O loop error #{self.io_errors}: {type(err).__name__}: {err}")
+                if not rclpy.ok(context=self.context):
                     return
+                self._stop.wait(0.01)
+
+    def _publish_states(self, readings, clock) -> None:
+        # sample times are on the link's monotonic clock; shift them onto the node clock
+        shift = clock.now().nanoseconds - round(self.link.clock() * 1e9)
+        for t, r in readings:
+            msg = JointState()
+            msg.header.stamp = Time(nanoseconds=round(t * 1e9) + shift).to_msg()
+            msg.header.frame_id = self.cfg.frame_id
+            msg.name = ["stage"]
+            msg.position = [r.position_m]
+            msg.effort = [r.applied_v]
+            self.pub_state.publish(msg)
 
     def stop_io(self) -> None:
         """Stop the I/O thread (before the shutdown ramp, which runs in the caller's thread)."""
@@ -204,6 +243,8 @@ class DriverNode(Node):
         st = DiagnosticStatus(name="hyst_driver: stage link", hardware_id=h.identity or self.cfg.port)
         if h.state != "running":
             st.level, st.message = DiagnosticStatus.ERROR, f"link {h.state}: {h.last_link_error or 'connecting'}"
+        elif self.io_errors != getattr(self, "_prev_io_errors", 0):
+            st.level, st.message = DiagnosticStatus.ERROR, f"{self.io_errors} I/O loop errors (see log)"
         elif grew("severe_faults"):
             st.level, st.message = DiagnosticStatus.ERROR, f"device fault {h.last_device_error}"
         elif bad != bad_prev or grew("device_errors") or grew("timeouts") or grew("disconnects"):
@@ -212,6 +253,7 @@ class DriverNode(Node):
             st.level, st.message = DiagnosticStatus.WARN, "no commands: holding/ramping to v_safe"
         else:
             st.level, st.message = DiagnosticStatus.OK, "running"
+        self._prev_io_errors = self.io_errors
         kv = {"state": h.state, "port": self.cfg.port, "protocol": self.cfg.protocol, "identity": h.identity,
               "connects": h.connects, "disconnects": h.disconnects, "handshake_failures": h.handshake_failures,
               "samples": h.samples, "lost_samples": h.lost_samples, "timeouts": h.timeouts,
@@ -220,8 +262,12 @@ class DriverNode(Node):
               "last_device_error": h.last_device_error, "last_link_error": h.last_link_error,
               "writes": h.writes, "commanded_v": h.commanded_v, "applied_v": h.applied_v,
               "clipped": h.clipped, "rejected": h.rejected, "slew_limited": h.slew_limited,
-              "watchdog_active": h.watchdog_active, "bad_commands": self.bad_commands,
+              "watchdog_active": h.watchdog_active, "bad_commands": self.bad_commands, "io_errors": self.io_errors,
               "v_min": self.cfg.v_min, "v_max": self.cfg.v_max, "v_safe": self.cfg.v_safe}
+        lat = sorted(self._latency)
+        if lat:
+            kv.update({"latency_ms.p50": lat[len(lat) // 2] * 1e-6,
+                       "latency_ms.p99": lat[int(0.99 * (len(lat) - 1))] * 1e-6, "latency_ms.max": lat[-1] * 1e-6})
         st.values = [KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v)) for k, v in kv.items()]
         arr = DiagnosticArray(status=[st])
         arr.header.stamp = self.get_clock().now().to_msg()
@@ -229,47 +275,82 @@ class DriverNode(Node):
 
 
 def main(args=None) -> int:
-    """Console script ``hyst_driver_node``."""
-    rclpy.init(args=args)
-    node = None
+    """Console script ``hyst_driver_node``.
+
+    The executor (rclpy's EventsExecutor: the lowest command latency, which the 1 kHz loop needs) spins in a
+    thread; the main thread owns SIGINT/SIGTERM, because in this rclpy EventsExecutor.spin() does not return on
+    a signal and its shutdown() hangs while spin() runs. On any way out the output ramps to ``v_safe`` before
+    the port closes.
+    """
+    from rclpy.utilities import remove_ros_args
+
+    user_args = remove_ros_args(args if args is not None else sys.argv)[1:]
+    if user_args:
+        if set(user_args) & {"-h", "--help"}:
+            print(usage())
+            return 0
+        print(f"hyst_driver_node: unexpected argument(s) {' '.join(user_args)}; settings are ROS parameters "
+              "(--ros-args -p name:=value); see --help", file=sys.stderr)
+        return 2
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    node = executor = spinner = None
     code = 0
     try:
         node = DriverNode()
         try:
-            from rclpy.experimental import EventsExecutor  # lowest command latency (commands wake the I/O thread)
+            from rclpy.experimental import EventsExecutor
             executor = EventsExecutor()
         except ImportError:  # pragma: no cover - older rclpy
             executor = rclpy.executors.SingleThreadedExecutor()
         executor.add_node(node)
-        executor.spin()
+
+        def spin() -> None:  # spin_once in a loop: EventsExecutor.shutdown() hangs while spin() runs
+            while not stop.is_set():
+                executor.spin_once(timeout_sec=0.05)
+
+        spinner = threading.Thread(target=spin, name="hyst_driver_spin", daemon=True)
+        spinner.start()
+        while not stop.wait(0.1):
+            if not spinner.is_alive():  # a callback raised: stop, ramp down, report
+                print("hyst_driver_node: executor stopped unexpectedly", file=sys.stderr)
+                code = 1
+                break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (DriverError, ConfigError, ValueError) as err:  # bad user input: one line, non-zero exit
         print(f"hyst_driver_node: {err}", file=sys.stderr)
         code = 2
     except Exception as err:
-        if node is not None and not rclpy.ok():
-            pass  # a callback tripped over the context going down under a signal: that is the shutdown
-        elif type(err).__module__.startswith(("hyst_", "rclpy")):
+        if type(err).__module__.startswith(("hyst_", "rclpy")):
             print(f"hyst_driver_node: {err}", file=sys.stderr)
             code = 2
         else:
             raise
     finally:
+        stop.set()
         if node is not None:
             node.stop_io()
             ok = node.link.ramp_to_safe(max_seconds=_ramp_seconds(node.cfg))
             print(f"hyst_driver_node: {'ramped to' if ok else 'could not confirm'} v_safe = {node.cfg.v_safe} V "
                   f"(link {node.link.health.state})", file=sys.stderr)
             node.link.close()
+        if executor is not None:
+            if spinner is not None:
+                spinner.join(2.0)
+            executor.shutdown()
+        if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
 
 
 def _ramp_seconds(cfg: DriverConfig) -> float:
-    """Time to ramp across the whole window at the safe ramp rate, plus margin for a reconnect, at most 10 s."""
-    return min(10.0, (cfg.v_max - cfg.v_min) / min(cfg.slew_max, cfg.safe_ramp_rate) + 1.0)
+    """Time to ramp across the whole window at the safe ramp rate, with margin for a busy host and a reconnect,
+    at most 10 s."""
+    return min(10.0, 1.5 * (cfg.v_max - cfg.v_min) / min(cfg.slew_max, cfg.safe_ramp_rate) + 1.0)
 
 
 if __name__ == "__main__":

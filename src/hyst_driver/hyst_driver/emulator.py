@@ -65,13 +65,13 @@ class EmulatedDevice:
         self._tick_us = round(cfg.dt * 1e6)
 
     # ------------------------------------------------------------ samples
-    def tick(self) -> bytes:
-        """Advance one sample; return a ``P`` frame when streaming, else nothing."""
+    def tick(self, emit: bool = True) -> bytes:
+        """Advance one sample; return a ``P`` frame when streaming (and ``emit``), else nothing."""
         r = self.plant.step(self.v_set)
         self.y = r.y
         self.seq = (self.seq + 1) & 0xFFFF
         self.t_us = (self.t_us + self._tick_us) & 0xFFFFFFFF
-        return self._sample() if self.streaming else b""
+        return self._sample() if self.streaming and emit else b""
 
     def _sample(self) -> bytes:
         return hdb.encode_sample(hdb.Sample(self.seq, self.t_us, round(self.y / self.counts_to_m),
@@ -175,7 +175,8 @@ class PtyEmulator:
     def __init__(self, device: EmulatedDevice, link: str | None = None, rates: FaultRates | None = None,
                  seed: int = 0, timeout_s: float = 0.1, unplug_s: float = 0.1) -> None:
         self.device = device
-        self.link = link or os.path.join(tempfile.mkdtemp(prefix="hyst_emulator_"), "tty")
+        self._tmpdir = None if link else tempfile.mkdtemp(prefix="hyst_emulator_")
+        self.link = link or os.path.join(self._tmpdir, "tty")
         self.rates = rates or FaultRates()
         self.rng = random.Random(seed)
         self.timeout_s, self.unplug_s = timeout_s, unplug_s
@@ -223,6 +224,11 @@ class PtyEmulator:
         if self._thread is not None:
             self._thread.join(2.0)
         self._unplug()
+        if self._tmpdir is not None:
+            try:
+                os.rmdir(self._tmpdir)
+            except OSError:
+                pass
 
     def inject(self, kind: str, duration: float | None = None) -> None:
         """Queue one fault (thread-safe); ``duration`` for ``timeout``/``unplug`` (s)."""
@@ -309,9 +315,12 @@ class PtyEmulator:
                 self._random_faults()
                 self._send(self.device.tick())
                 next_tick += self.dt
-                if now - next_tick > 20 * self.dt:  # fell far behind (loaded machine): resume, do not burst
+                behind = int((now - next_tick) / self.dt)
+                if behind > 20:  # fell far behind (loaded machine): the clock and the stage go on, samples are lost
                     self.overruns += 1
-                    next_tick = now + self.dt
+                    for _ in range(behind):
+                        self.device.tick(emit=False)
+                    next_tick += behind * self.dt
 
 
 def _parse(argv: list[str] | None) -> argparse.Namespace:
@@ -323,6 +332,9 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--params-file", default=None, help="MBW params file for the plant")
     ap.add_argument("--faults", default="", help="random faults per line, e.g. garbage=0.001,unplug=1e-5")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--nice", type=int, default=0,
+                    help="change the scheduling priority (negative = higher; needs privileges): a real DAQ bridge "
+                         "has its own microcontroller and never waits for a busy host")
     return ap.parse_args(argv)
 
 
@@ -359,6 +371,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"hyst_emulator: {err}", file=sys.stderr)
             return 2
         raise
+    if args.nice:
+        try:
+            os.nice(args.nice)
+        except OSError as err:
+            print(f"hyst_emulator: priority unchanged ({err}); timing follows the host's load", file=sys.stderr)
     signal.signal(signal.SIGTERM, _raise_interrupt)  # `kill` cleans up the port link like Ctrl-C
     emu = PtyEmulator(dev, args.link, rates, seed=args.seed)
     try:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from hyst_model.errors import HystError
 
-__all__ = ["DriverError", "ProtocolError", "ChecksumError", "EncodeError", "DeviceError", "LinkError",
+__all__ = ["DriverError", "ProtocolError", "ChecksumError", "EncodeError", "LinkError",
            "ConfigError"]
 
 
@@ -24,15 +24,6 @@ class ChecksumError(ProtocolError):
 
 class EncodeError(DriverError):
     """A value cannot be put on the wire (non-finite, out of the field's range). Never sent, never clipped."""
-
-
-class DeviceError(DriverError):
-    """The device answered with an error reply; ``code`` is the device's error number."""
-
-    def __init__(self, code: int, text: str = "") -> None:
-        super().__init__(f"device error {code}: {text}" if text else f"device error {code}")
-        self.code = int(code)
-        self.text = text
 
 
 class LinkError(DriverError):

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from .errors import ConfigError
 
@@ -72,13 +73,13 @@ class Limits:
         inv = round(1.0 / self.quantum)
         return k / inv if abs(inv * self.quantum - 1.0) < 1e-12 else k * self.quantum
 
-    @property
+    @cached_property  # frozen: computed once per Limits (the limiter asks every sample)
     def lo_q(self) -> int:
         """Smallest grid index whose voltage is ≥ v_min."""
         k = round(self.v_min / self.quantum)
         return k + 1 if self.to_volts(k) < self.v_min else k
 
-    @property
+    @cached_property
     def hi_q(self) -> int:
         """Largest grid index whose voltage is ≤ v_max."""
         k = round(self.v_max / self.quantum)
@@ -109,6 +110,9 @@ class VoltageLimiter:
     v0 : float, optional
         Present output (e.g. the voltage the device reports after connecting); ``v_safe`` if omitted.
     """
+
+    #: Longest time step (s) credited to a ramp to ``v_safe`` (keeps a stalled host from licensing a jump).
+    RAMP_DT_MAX = 0.1
 
     def __init__(self, limits: Limits, v0: float | None = None) -> None:
         self._limits = limits
@@ -190,8 +194,10 @@ class VoltageLimiter:
         lim = self._limits
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             dt = 0.0
-        rate = min(lim.slew_max, lim.safe_ramp_rate) if self._safe else lim.slew_max
-        max_dk = math.floor(rate * min(dt, lim.dt_max) / lim.quantum)
+        step = lim.slew_max * min(dt, lim.dt_max)  # the hard limit: what the amplifier sees per sample
+        if self._safe and math.isfinite(lim.safe_ramp_rate):  # the gentler ramp follows real time (a late write catches up), never above the hard limit
+            step = min(step, lim.safe_ramp_rate * min(dt, self.RAMP_DT_MAX))
+        max_dk = math.floor(step / lim.quantum)
         dk = self._target_k - self._k
         if abs(dk) > max_dk:
             self.counts.slew_limited += 1

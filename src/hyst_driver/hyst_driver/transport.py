@@ -14,7 +14,9 @@ from __future__ import annotations
 import math
 import os
 import select
+import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -24,7 +26,42 @@ from .adapter import Adapter, BadFrame, DeviceFault, Identified, Reading
 from .errors import EncodeError, LinkError
 from .safety import CommandWatchdog, Limits, VoltageLimiter
 
-__all__ = ["SerialTransport", "DeviceLink", "LinkHealth"]
+__all__ = ["SerialTransport", "DeviceLink", "LinkHealth", "DeviceClock"]
+
+
+class DeviceClock:
+    """Map a device's sample clock to the host clock, so stamps are sample times, not arrival times.
+
+    ``host ≈ device + offset``. Every arrival bounds the offset from above (``host_rx - device`` includes the
+    transfer latency), so the estimate is the smallest bound over a sliding window of ``window`` device seconds:
+    host jitter (a busy machine reading late) does not reach the stamps, and crystal drift or a device that lost
+    time is followed within one window. Device time wraps at ``wrap`` s (HDB/1: 2**32 µs).
+    """
+
+    def __init__(self, wrap: float = 2.0 ** 32 * 1e-6, window: float = 1.0) -> None:
+        self.wrap, self.window = wrap, window
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the mapping (the device restarted its clock, e.g. after a reconnect)."""
+        self._last_raw: float | None = None
+        self._turns = 0
+        self._mins: deque[tuple[float, float]] = deque()  # (device time, bound), bounds increasing
+
+    def map(self, device_t: float, host_t: float) -> float:
+        """Host time (same clock as ``host_t``) of the sample the device stamped ``device_t``."""
+        if self._last_raw is not None and device_t < self._last_raw - 0.5 * self.wrap:
+            self._turns += 1
+        self._last_raw = device_t
+        dev = device_t + self._turns * self.wrap
+        bound = host_t - dev
+        q = self._mins
+        while q and q[-1][1] >= bound:  # monotonic deque: the window minimum is always q[0]
+            q.pop()
+        q.append((dev, bound))
+        while q[0][0] < dev - self.window:
+            q.popleft()
+        return dev + q[0][1]
 
 
 class SerialTransport:
@@ -43,7 +80,7 @@ class SerialTransport:
     """
 
     def __init__(self, url: str, baudrate: int = 921600, opener: Callable = serial.serial_for_url,
-                 backoff: tuple[float, float] = (0.02, 0.5), write_timeout: float = 0.05) -> None:
+                 backoff: tuple[float, float] = (0.02, 0.5), write_timeout: float = 0.2) -> None:
         self.url, self.baudrate, self._opener = url, int(baudrate), opener
         self.backoff = backoff
         self.write_timeout = write_timeout
@@ -193,14 +230,27 @@ class DeviceLink:
         self._hs_tries = 0
         self._seeded = False
         self._seed: float | None = None
+        self.device_clock = DeviceClock()
+        self._lock = threading.Lock()  # command() (executor thread) and service() (I/O thread) share the port
         self._wake_r, self._wake_w = os.pipe()
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
 
     # ------------------------------------------------------------ inputs from other threads
     def command(self, volts: float, now: float | None = None) -> None:
-        """Queue a commanded voltage (thread-safe: one atomic assignment plus a wake-up byte)."""
-        self._pending_cmd = (volts, self.clock() if now is None else now)
+        """A commanded voltage (thread-safe). While running it is limited and written at once, in the caller's
+        thread (one thread hop less in the 1 kHz loop); otherwise it waits for the link to come up."""
+        now = self.clock() if now is None else now
+        with self._lock:
+            if self.health.state == "running" and self._pending_limits is None:
+                self.watchdog.feed(now)
+                self.limiter.request(volts)
+                try:
+                    self._write_voltage(now)
+                except LinkError as err:
+                    self._drop(str(err))
+                return
+            self._pending_cmd = (volts, now)
         self.wake()
 
     def set_limits(self, limits: Limits, command_timeout: float | None = None) -> None:
@@ -233,8 +283,11 @@ class DeviceLink:
                 pass
 
     def next_deadline(self) -> float:
-        """Latest time :meth:`service` must run again without input (ramps, polls, timeouts, reconnects)."""
-        return self.clock() + min(self.period, 0.01)
+        """Latest time :meth:`service` must run again without input: every sample while ramping or polling,
+        else every 5 ms (timeouts, keepalive, reconnects) — streamed samples wake the I/O thread anyway, and
+        fewer idle wake-ups leave the CPU to the rest of the 1 kHz loop."""
+        busy = self.health.state != "running" or not self.limiter.settled or not self.adapter.streaming
+        return self.clock() + (self.period if busy else max(self.period, 0.005))
 
     def close(self) -> None:
         self.transport.close()
@@ -252,13 +305,15 @@ class DeviceLink:
                        rejected=c.rejected, slew_limited=c.slew_limited)
 
     def service(self, now: float | None = None) -> list[tuple[float, Reading]]:
-        """Do everything that is due; return ``(receive_time, reading)`` pairs. Never raises on link trouble."""
-        now = self.clock() if now is None else now
+        """Do everything that is due; return ``(sample_time, reading)`` pairs (sample time on :attr:`clock`:
+        the device clock mapped by :class:`DeviceClock`, else the arrival time). Never raises on link trouble."""
         out: list[tuple[float, Reading]] = []
-        try:
-            self._service(now, out)
-        except LinkError as err:
-            self._drop(str(err))
+        with self._lock:
+            now = self.clock() if now is None else now
+            try:
+                self._service(now, out)
+            except LinkError as err:
+                self._drop(str(err))
         return out
 
     def _drop(self, why: str) -> None:
@@ -279,6 +334,7 @@ class DeviceLink:
                 h.last_link_error = self.transport.last_error or h.last_link_error
                 return
             self.adapter.reset()
+            self.device_clock.reset()
             h.state, h.identity, self._seeded, self._hs_tries, self._seed = "handshake", "", False, 0, None
             self._send_handshake(now)
         data = self.transport.read()
@@ -319,7 +375,7 @@ class DeviceLink:
                 self._seed = ev.applied_v
                 return
             h.samples += 1
-            out.append((now, ev))
+            out.append((now if ev.device_time is None else self.device_clock.map(ev.device_time, now), ev))
         elif isinstance(ev, BadFrame):
             h.bad_frames[ev.kind] = h.bad_frames.get(ev.kind, 0) + 1
         elif isinstance(ev, DeviceFault):

@@ -12,7 +12,7 @@ from hyst_driver.errors import ConfigError
 def test_ascii_scales_counts_and_microvolts_to_si():
     ad = AsciiAdapter(counts_to_m=2e-9)
     ev = ad.feed(hdb.encode_sample(hdb.Sample(1, 1000, 7500, 75_000_000)))
-    assert ev == [Reading(7500 * 2e-9, 75.0, 1)]
+    assert ev == [Reading(7500 * 2e-9, 75.0, 1, 1e-3)]
     assert ad.set_voltage(75.0) == b"$SV,75000000*A5\r\n"
     assert ad.poll() == b"" and ad.streaming
 
@@ -20,7 +20,7 @@ def test_ascii_scales_counts_and_microvolts_to_si():
 def test_ascii_events_split_across_reads_and_bad_frames_counted():
     ad = AsciiAdapter(2e-9, v_plausible=(-15.0, 165.0))
     stream = (hdb.encode_identity(hdb.Identity("a", "b", "c", "d")) + b"\x00\xffjunk\n"
-              + hdb.encode_sample(hdb.Sample(5, 0, 1, 1_000_000)).replace(b"*", b"*0")  # syntax
+              + hdb.encode_sample(hdb.Sample(5, 0, 1, 1_000_000)).replace(b"*", b"*0")     # syntax
               + b"$P,6,0,1,1000000*00\r\n"                                              # checksum
               + hdb.encode_sample(hdb.Sample(9, 0, -3, 170_000_000))                    # implausible
               + hdb.encode_error(5) + hdb.encode_error(3)
@@ -30,12 +30,14 @@ def test_ascii_events_split_across_reads_and_bad_frames_counted():
     for i in range(0, len(stream), 7):  # arbitrary chunking must not matter
         events += ad.feed(stream[i:i + 7])
     kinds = [e.kind if isinstance(e, BadFrame) else type(e).__name__ for e in events]
-    assert kinds == ["Identified", "garbage", "syntax", "syntax", "checksum", "implausible", "DeviceFault", "DeviceFault",
-                     "Reading", "Reading"]
+    assert kinds == ["Identified", "garbage", "syntax", "syntax", "checksum", "implausible", "DeviceFault",
+                     "DeviceFault", "Reading", "Reading"]
     assert events[6] == DeviceFault(5, hdb.ERROR_CODES[5], severe=True) and not events[7].severe
     assert ad.lost_samples == 2  # 7 -> 10
+    spliced = hdb.encode_sample(hdb.Sample(11, 0, 5, 0))[:9] + hdb.encode_sample(hdb.Sample(12, 0, 6, 0))
+    assert [type(e).__name__ for e in ad.feed(spliced)] == ["BadFrame", "Reading"]
     ad.reset()
-    assert ad.feed(hdb.encode_sample(hdb.Sample(100, 0, 0, 0)))[0].seq == 100 and ad.lost_samples == 2
+    assert ad.feed(hdb.encode_sample(hdb.Sample(100, 0, 0, 0)))[0].seq == 100 and ad.lost_samples == 3
 
 
 def test_gcs_pairs_replies_in_query_order():
@@ -48,7 +50,8 @@ def test_gcs_pairs_replies_in_query_order():
     ad.poll()
     assert ad.error_query() == b"ERR?\n"
     ev = ad.feed(b"1=1.0\n1=2.0\n1000\n")
-    assert isinstance(ev[0], Reading) and ev[1] == DeviceFault(1000, "amplifier fault (overload or over-temperature)", True)
+    assert isinstance(ev[0], Reading)
+    assert ev[1] == DeviceFault(1000, "amplifier fault (overload or over-temperature)", True)
 
 
 def test_gcs_bad_line_drops_the_exchange_instead_of_mispairing():
@@ -60,6 +63,10 @@ def test_gcs_bad_line_drops_the_exchange_instead_of_mispairing():
     assert ad.feed(b"1=10.0\n1=500.0\n") == [BadFrame("implausible", "applied voltage 500.0 V")]
     ad.poll()  # a late reply of an abandoned exchange is never paired with the new one
     assert len(ad.feed(b"1=10.0\n1=20.0\n")) == 1
+    ad.error_query()
+    ad.poll()  # ERR? abandoned by a new exchange: its late answer is still reported, not dropped
+    assert ad.feed(b"17\n1=1.0\n1=2.0\n") == [DeviceFault(17, "parameter out of range", False),
+                                                Reading(pytest.approx(1e-6), 2.0, None)]
 
 
 def test_make_adapter():

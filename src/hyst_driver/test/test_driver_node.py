@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-import os
 import signal
 import subprocess
 import sys
@@ -71,6 +70,27 @@ def test_parameters_declared_with_ranges_and_validated_on_set(ctx, emu):
         _spin(node, ex, 0.3)
         assert node.link.limiter.limits.v_max == 100.0  # swapped into the running link
         assert node.link.health.state == "running"
+    finally:
+        node.stop_io()
+        node.link.close()
+        node.destroy_node()
+
+
+def test_gma_profile_sets_limit_defaults_and_ranges(ctx, tmp_path):
+    from hyst_driver.driver_node import DriverNode
+
+    node = DriverNode(context=ctx, parameter_overrides=[Parameter("profile", value="gma"),
+                                                        Parameter("port", value=str(tmp_path / "no_such_port"))])
+    try:
+        c = node.cfg
+        assert (c.v_min, c.v_max, c.v_safe, c.slew_max) == (-5.0, 5.0, 0.0, 1.0e4)
+        assert node.describe_parameter("v_min").floating_point_range[0].from_value == -5.0
+        assert not node.set_parameters([Parameter("v_max", value=10.0)])[0].successful
+        time.sleep(0.1)
+        h = node.link.snapshot()  # no port: the node is up, reports the link down and keeps retrying
+        assert h.state == "disconnected" and "no_such_port" in h.last_link_error
+        d = node.diagnostics(h).status[0]
+        assert d.level == d.ERROR and "disconnected" in d.message
     finally:
         node.stop_io()
         node.link.close()
@@ -168,6 +188,7 @@ def test_node_survives_every_fault_class_and_ramps_to_safe_on_sigint(ctx, emu):
         assert c["rejected"] > 0 and c["clipped"] > 0 and c["bad_commands"] > 0, c
         assert any(d["level"] != 0 for d in probe.diag), "faults never showed as WARN/ERROR"
         assert all(10.0 <= s.effort[0] <= 120.0 for s in probe.states[-100:])
+        assert float(last["latency_ms.p50"]) > 0.0  # answers carry the state stamp: loop latency is reported
     finally:
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=20)
@@ -179,3 +200,13 @@ def test_node_survives_every_fault_class_and_ramps_to_safe_on_sigint(ctx, emu):
     assert rx[-1] == 20.0
     assert 10.0 <= min(rx) and max(rx) <= 120.0
     assert max(abs(b - a) for a, b in zip(rx, rx[1:])) <= 20.0 + 1e-6
+
+
+def test_help_lists_every_parameter_and_exits_0(capsys):
+    from hyst_driver.driver_node import main, param_table
+    from hyst_sim.profiles import PEA
+
+    assert main(["hyst_driver_node", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"  {name} " in out for name, *_ in param_table(PEA))
+    assert main(["hyst_driver_node", "stray"]) == 2 and "unexpected argument" in capsys.readouterr().err

@@ -126,3 +126,34 @@ def test_cli_prints_port_serves_and_cleans_up(tmp_path):
         p.send_signal(signal.SIGTERM)
         p.wait(10)
     assert p.returncode == 0 and not os.path.lexists(link)
+
+
+def test_device_clock_maps_sample_times_despite_host_jitter():
+    from hyst_driver.transport import DeviceClock
+
+    import random
+    rng = random.Random(0)
+    c = DeviceClock(wrap=10.0)
+    out = []
+    for k in range(3000):              # 1 kHz device clock wrapping every 10 s, host 100 s later + jitter 0..5 ms
+        dev = (k * 1e-3) % 10.0
+        host = 100.0 + k * 1e-3 + 2e-4 + (rng.random() ** 4) * 5e-3
+        out.append(c.map(dev, host))
+    d = [b - a for a, b in zip(out, out[1:])]
+    assert max(abs(x - 1e-3) for x in d[100:]) < 2e-5          # regular 1 ms stamps: 5 ms jitter -> < 20 us
+    assert all(o <= 100.0 + k * 1e-3 + 2e-4 + 5e-3 for k, o in enumerate(out))  # never after the arrival
+    assert abs(out[-1] - (100.0 + 2.999 + 2e-4)) < 5e-5         # offset converges to the minimum latency
+    c2 = DeviceClock(wrap=4.0)
+    assert c2.map(3.999, 10.0) < c2.map(0.001, 10.01) < 10.01   # unwraps
+
+
+def test_device_clock_follows_a_device_that_lost_time():
+    from hyst_driver.transport import DeviceClock
+
+    c = DeviceClock(window=1.0)
+    for k in range(1000):
+        c.map(k * 1e-3, 50.0 + k * 1e-3 + 3e-4)
+    # the device stalls for 0.3 s (its clock stops, the host's does not), then runs on
+    stamps = [c.map((1000 + k) * 1e-3, 50.3 + (1000 + k) * 1e-3 + 3e-4) for k in range(2500)]
+    assert stamps[0] < 50.0 + 1.0 + 3e-4 + 1e-9           # within the window the old offset still holds
+    assert abs(stamps[-1] - (50.3 + 3.499 + 3e-4)) < 1e-9  # one window later the stamps are right again

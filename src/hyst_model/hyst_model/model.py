@@ -90,6 +90,9 @@ class MBWModel(Model):
     terms ζ2, ψ2, α2 absent for BW) and the output offset in metres. ``u_scale`` (V per model unit) and
     ``y_scale`` (m per model unit) are fixed normalisations chosen from the data so that the thesis's bounds
     apply (scaling y by c equals scaling ζ1, ζ2 by c; scaling u is exact).
+
+    Besides the protocol it offers the exact Jacobian (:meth:`simulate_jac`) and fused Gauss-Newton normal
+    equations (:meth:`normal_equations`) from forward sensitivities, which :mod:`hyst_model.identify` uses.
     """
 
     def __init__(self, u_scale: float = 1.0, y_scale: float = 1.0, rate: bool = True,
@@ -144,6 +147,19 @@ class MBWModel(Model):
         J[:, :-1] = self.y_scale * S[:, self._cols]
         J[:, -1] = 1.0
         return self.y_scale * ym + p.offset, J
+
+    def normal_equations(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray, a: int, y: np.ndarray,
+                         scale: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """JᵀJ, Jᵀr, rᵀr of the residual (simulate(θ)[a:] − y)/scale in one fused pass (for Gauss-Newton/LM)."""
+        from .core.sensitivity import mbw_normal_equations, mbw_rest_state_sens
+        p = self.to_params(theta)
+        pv = p.vector
+        un = np.ascontiguousarray(np.asarray(u, dtype=np.float64) / self.u_scale)
+        y0, S0 = mbw_rest_state_sens(pv, un[0]) if un.size else (0.0, np.zeros(8))
+        if not np.isfinite(y0):
+            return np.zeros((len(self._params),) * 2), np.zeros(len(self._params)), np.inf
+        return mbw_normal_equations(pv, un, y0, S0, self._cols, self.y_scale, p.offset, int(a),
+                                    np.ascontiguousarray(y, dtype=np.float64), 1.0 / scale)
 
     def config(self) -> dict[str, float | str]:
         return {"u_scale": self.u_scale, "y_scale": self.y_scale, "offset_bound": self.offset_bound}

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -241,8 +242,15 @@ class ResidualNode(Node):
         s = self._settings
         tt = np.fromiter((b[0] for b in self._buf), float, len(self._buf))
         uu = np.fromiter((b[1] for b in self._buf), float, len(self._buf))
+        t0 = time.perf_counter()
         with np.errstate(all="ignore"):
             yy = np.asarray(s.model.simulate(s.theta, tt, uu), dtype=float)
+        spent = time.perf_counter() - t0
+        span = self._pending[-1][1] - self._pending[0][1] if len(self._pending) > 1 else 0.0
+        if span > 0 and spent > span:
+            self.get_logger().warning(
+                f"re-simulating {tt.size} samples took {spent * 1e3:.0f} ms for {span * 1e3:.0f} ms of data: the "
+                "node falls behind; lower 'history' or raise 'batch'", throttle_duration_sec=5.0)
         k0 = len(tt) - len(self._pending)
         for i, (stamp, _, y) in enumerate(self._pending):
             j = k0 + i

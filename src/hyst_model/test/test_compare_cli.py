@@ -73,6 +73,7 @@ def test_perfect_model_is_at_the_noise_floor(tmp_path, capsys):
     assert any("sensor noise level" in f for f in d["findings"])
 
 
+@pytest.mark.slow
 def test_text_summary_and_report_dir_policy(tmp_path, capsys):
     model, theta, params = _model_and_params(tmp_path)
     t, u = _input()
@@ -133,3 +134,19 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, msg):
     lines = [ln for ln in err.splitlines() if "warning: subcommand" not in ln]
     assert code == 2 and len(lines) == 1 and msg in lines[0] and "Traceback" not in err
     assert out == ""
+
+
+def test_compare_reads_a_state_bag(tmp_path, capsys):
+    from hyst_model.io.bag import write_state_bag
+    model, theta, params = _model_and_params(tmp_path)
+    t, u = _input()
+    y = model.simulate(theta, t, u) + 4e-8
+    bag = write_state_bag(tmp_path / "run1", t, u, y)
+    code, out, err = _run(capsys, ["compare", str(bag), "--params", str(params), "--json"])
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["n"] == t.size and d["overall"]["rmse"] == pytest.approx(4e-8, rel=1e-6)
+    assert d["overall"]["bias"] == pytest.approx(4e-8, rel=1e-6)
+    assert any("constant offset" in f for f in d["findings"])
+    code, _, err = _run(capsys, ["compare", str(bag), "--params", str(params), "--topic", "/nope"])
+    assert code == 2 and "Traceback" not in err

@@ -226,3 +226,19 @@ def test_real_benchmark_test_rmse_below_1e_5():
     e = bb.test_rmse(fb["model"], fb["theta_model"], te.u, te.y)
     assert e < 1e-5
     assert e < 1e-6  # measured 1.7e-7 m; far below the best published 1.87e-5 m
+
+
+def test_signature_finds_a_resonance_in_broadband_data():
+    fs, n = 750.0, 8192
+    u = _multisine(n, fs, 5, 150, 50, 11)
+    t = np.arange(n) / fs
+    eff = DynamicsEffect({"dt": 1 / fs})
+    x = 1e-5 * u
+    r = series_filter(x, 36.0, 0.02, 1 / fs) - x
+    score, ev = eff.signature(t, u, r, 1 / fs)
+    assert score > 0.8 and "resonance" in ev
+    peak = float(ev.split("peaks at ")[1].split(" Hz")[0])
+    assert peak == pytest.approx(36.0, abs=2.0)
+    rng = np.random.default_rng(1)
+    s_noise, _ = eff.signature(t, u, 1e-6 * rng.standard_normal(n), 1 / fs)
+    assert s_noise < 0.2

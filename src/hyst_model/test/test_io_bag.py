@@ -113,3 +113,24 @@ def test_columns_option_rejected_for_bags(tmp_path):
     write_state_bag(tmp_path / "b", t, u, y)
     with pytest.raises(DataError, match="CSV"):
         load_record(tmp_path / "b", columns="a,b,c")
+
+
+@pytest.mark.parametrize("single", [False, True])
+def test_salvage_reads_a_killed_recorders_bag_up_to_the_damage(tmp_path, single):
+    t, u, y = _data(3000)
+    path = tmp_path / ("b.mcap" if single else "b")
+    write_state_bag(path, t, u, y)
+    f = path if single else next(path.glob("*.mcap"))
+    data = f.read_bytes()
+    f.write_bytes(data[: int(len(data) * 0.8)])  # footer, summary and indexes gone; the chunks are intact
+    with pytest.raises(DataError):
+        read_state_bag(path)
+    rec = read_state_bag(path, salvage=True)
+    assert rec.meta["salvaged"] and len(rec) == 3000
+    np.testing.assert_array_equal(rec.u, u[: len(rec)])
+    rec.check()
+    with pytest.raises(DataError, match="nothing on '/other'"):
+        read_state_bag(path, "/other", salvage=True)
+    f.write_bytes(data[:2000])  # cut inside the only chunk: nothing to salvage, still one clear error
+    with pytest.raises(DataError, match="could be salvaged"):
+        read_state_bag(path, salvage=True)

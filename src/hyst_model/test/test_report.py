@@ -26,6 +26,7 @@ def _png_ok(p):
     return b[:8] == b"\x89PNG\r\n\x1a\n" and len(b) > 2000
 
 
+@pytest.mark.slow
 def test_report_contains_plots_tables_and_escaped_text(tmp_path):
     rec, yhat = _record()
     st = compare_stats(rec.t, rec.u, rec.y, yhat)
@@ -48,6 +49,7 @@ def test_report_contains_plots_tables_and_escaped_text(tmp_path):
     assert (d / MARKER).exists()
 
 
+@pytest.mark.slow
 def test_no_ladder_no_ladder_png(tmp_path):
     rec, yhat = _record()
     d = write_report(tmp_path / "r", rec, yhat, compare_stats(rec.t, rec.u, rec.y, yhat))

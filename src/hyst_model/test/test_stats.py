@@ -73,9 +73,10 @@ def test_fit_by_branch_and_level():
     u = 75 + 75 * np.sin(2 * np.pi * t)
     y = u * 2e-7
     du = np.diff(u, prepend=u[0])
+    du[0] = du[1]
     yhat = y - np.where(du > 0, 1e-7, 0.0)  # error on the rising branch only
     br = S.fit_by_branch(u, y, yhat)
-    assert br["rising"].rmse == pytest.approx(1e-7) and br["falling"].rmse == 0.0
+    assert br["rising"].rmse == pytest.approx(1e-7) and br["falling"].rmse == 0.0 and br["hold"].n == 0
     yhat = y - 1e-9 * u ** 2 / 150  # error grows with level
     lv = S.fit_by_level(u, y, yhat, n_levels=3)
     assert [lo for lo, _, _ in lv] == pytest.approx([0, 50, 100], abs=1e-6)
@@ -152,3 +153,66 @@ def test_compare_stats_json_and_lag_step():
         S.compare_stats(t, u, y, np.where(t > 1, np.nan, yhat))
     # 2 Hz dominant input at 1 kHz, 7000 samples: lags span about a quarter period of the strongest line
     assert cs.lag_step == S.auto_lag_step(t.size, 25, 1000.0, u)
+
+
+def test_harmonics_of_a_periodic_residual():
+    rng = np.random.default_rng(6)
+    fs, f = 2000.0, 1.0
+    t = np.arange(int(3 * fs)) / fs
+    e = 3e-8 * np.sin(2 * np.pi * 5 * f * t) + 1e-8 * np.cos(2 * np.pi * 2 * f * t + 0.3)
+    amp, share = S.harmonics(t, e + 1e-8 * rng.standard_normal(t.size), f)
+    assert amp[4] == pytest.approx(3e-8, rel=0.02) and amp[1] == pytest.approx(1e-8, rel=0.06)
+    assert share == pytest.approx(5e-16 / (5e-16 + 1e-16), rel=0.05)  # periodic power / total power
+    amp0, share0 = S.harmonics(t, 1e-8 * rng.standard_normal(t.size), f)
+    assert share0 < 0.01
+
+
+def test_ringing_after_a_step():
+    rng = np.random.default_rng(7)
+    fs = 5000.0
+    t = np.arange(1000) / fs
+    e = 1e-6 * np.exp(-t / 0.01) * np.sin(2 * np.pi * 950 * t) + 2e-8 * rng.standard_normal(t.size)
+    r = S.ringing(t, e, noise=2e-8)
+    assert r is not None and r[0] == pytest.approx(950, abs=30)
+    assert S.ringing(t, 2e-8 * rng.standard_normal(t.size), noise=2e-8) is None
+    # a slow creep-like drift is not ringing
+    assert S.ringing(t, 1e-6 * np.log1p(t / 1e-3), noise=2e-8) is None
+
+
+def test_broadband_input_is_one_segment_and_not_a_hold():
+    rng = np.random.default_rng(8)
+    fs, n = 750.0, 8192
+    U = np.zeros(n // 2 + 1, complex)
+    f = np.fft.rfftfreq(n, 1 / fs)
+    band = (f >= 5) & (f <= 150)
+    U[band] = np.exp(2j * np.pi * rng.random(band.sum()))
+    u = np.fft.irfft(U, n)
+    u *= 50 / u.std()
+    t = np.arange(n) / fs
+    segs = S.segment_input(t, u)
+    assert [s.kind for s in segs] == ["broadband"]
+    br = S.fit_by_branch(u, u, u)
+    assert br["hold"].n < 0.05 * n and br["rising"].n > 0.4 * n
+
+
+def test_spectral_peaks_find_a_resonance_line_not_the_trend():
+    rng = np.random.default_rng(9)
+    fs = 5000.0
+    n = 50000
+    t = np.arange(n) / fs
+    trend = np.cumsum(rng.standard_normal(n)) * 1e-3  # 1/f² background
+    line = 0.05 * np.sin(2 * np.pi * 970.0 * t + 0.1 * np.cumsum(rng.standard_normal(n)) / np.sqrt(n))
+    peaks = S.spectral_peaks(trend + line + 0.01 * rng.standard_normal(n), fs)
+    assert peaks and abs(peaks[0][0] - 970.0) < 3.0
+    assert S.spectral_peaks(trend + 0.01 * rng.standard_normal(n), fs) == []
+    # harmonics of a drive can be excluded
+    assert S.spectral_peaks(trend + line, fs, exclude=(970.0,)) == []
+
+
+def test_noisy_measured_input_still_segments_by_frequency():
+    rng = np.random.default_rng(10)
+    fs = 2000.0
+    t = np.arange(int(8 * fs)) / fs
+    u = 75 + 70 * np.sin(2 * np.pi * np.where(t < 4, 1.0, 3.0) * t) + 0.5 * rng.standard_normal(t.size)
+    sines = [s for s in S.segment_input(t, u) if s.kind == "sine"]
+    assert [round(s.freq, 2) for s in sines] == [1.0, 3.0]

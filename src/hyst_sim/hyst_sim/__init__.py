@@ -5,7 +5,12 @@ Layers: :mod:`hyst_sim.plant` and :mod:`hyst_sim.truth_effects` (numerical core,
 :mod:`hyst_sim.bagio` (file IO), ``*_node.py`` (thin rclpy nodes; the only modules importing rclpy).
 """
 from .errors import BagError, ConfigError, ScenarioError, SimError
+from .plant import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, Plant, PlantConfig, RunResult, StepResult
 from .profiles import GMA, PEA, PROFILES, Profile, clip_command, get_profile
+from .scenario import Scenario, load_scenario, scenario_dir
+from .truth_effects import EFFECT_NAMES, Effects
 
 __all__ = ["BagError", "ConfigError", "ScenarioError", "SimError",
-           "GMA", "PEA", "PROFILES", "Profile", "clip_command", "get_profile"]
+           "CLIP_NONFINITE", "CLIP_RANGE", "CLIP_SLEW", "Plant", "PlantConfig", "RunResult", "StepResult",
+           "GMA", "PEA", "PROFILES", "Profile", "clip_command", "get_profile",
+           "Scenario", "load_scenario", "scenario_dir", "EFFECT_NAMES", "Effects"]

@@ -2,13 +2,15 @@
 
 Usage::
 
-    hyst_bag_record [TOPIC ...] [-o bags/run1] [--duration 10] [--no-compress]
+    hyst_bag_record [TOPIC[:TYPE] ...] [-o bags/run1] [--duration 10] [--no-compress]
 
-Default topics: ``/stage/state /stage/command /stage/reference /controller/state``. Topics are subscribed when
-they appear (checked every 0.2 s) with raw subscriptions, so messages are stored as the serialized CDR bytes that
-arrived (any standard message type), stamped with the receive time. The QoS follows the publishers (best effort
-if any publisher is best effort, else reliable). SIGINT/SIGTERM or ``--duration`` stop recording and finalise
-the bag (metadata and MCAP summary); an existing output directory is refused.
+Default topics: ``/stage/state /stage/command /stage/reference /controller/state``. Messages are stored as the
+serialized CDR bytes that arrived (raw subscriptions: any standard message type), stamped with the receive time.
+The contract topics of docs/ARCHITECTURE.md (and ``/diagnostics``) have known types and are subscribed at once;
+other topics are subscribed when the ROS graph shows them (checked every 0.2 s; graph discovery can take
+seconds next to a 1 kHz publisher, so give ``TOPIC:pkg/msg/Type`` to start at once). Subscriptions are reliable
+and switch to best effort when a best-effort publisher appears. SIGINT/SIGTERM or ``--duration`` stop recording
+and finalise the bag (metadata and MCAP summary); an existing output directory is refused.
 """
 from __future__ import annotations
 
@@ -28,6 +30,11 @@ from .errors import BagError, SimError
 __all__ = ["RecordNode", "DEFAULT_TOPICS", "main"]
 
 DEFAULT_TOPICS = ("/stage/state", "/stage/command", "/stage/reference", "/controller/state")
+_JS = "sensor_msgs/msg/JointState"
+#: Types fixed by the contract (docs/ARCHITECTURE.md), so recording need not wait for graph discovery.
+KNOWN_TYPES = {"/stage/state": _JS, "/stage/command": _JS, "/stage/reference": _JS, "/controller/state": _JS,
+               "/model/prediction": _JS, "/model/residual": _JS,
+               "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
 
 
 class RecordNode(Node):
@@ -38,7 +45,7 @@ class RecordNode(Node):
     writer : RawBagWriter
         Open bag; the node writes into it, the caller closes it.
     topics : sequence of str
-        Topics to record.
+        Topics to record, each ``name`` or ``name:pkg/msg/Type``.
     duration : float or None
         Stop (``done`` becomes True) after this many seconds of recording.
     """
@@ -46,10 +53,15 @@ class RecordNode(Node):
     def __init__(self, writer: RawBagWriter, topics=DEFAULT_TOPICS, duration: float | None = None, **kwargs):
         super().__init__("hyst_bag_record", **kwargs)
         self.writer = writer
-        self.wanted = tuple(dict.fromkeys(topics))
+        self.types: dict[str, str | None] = {}
+        for t in topics:
+            name, _, msgtype = t.partition(":")
+            self.types[name] = msgtype or KNOWN_TYPES.get(name)
+        self.wanted = tuple(self.types)
         self.duration = duration
         self.done = False
         self._subs: dict[str, object] = {}
+        self._best_effort: set[str] = set()
         self._t0 = time.monotonic()
         self.create_timer(0.2, self._discover)
         self._discover()
@@ -58,24 +70,44 @@ class RecordNode(Node):
         if self.duration is not None and time.monotonic() - self._t0 >= self.duration:
             self.done = True
             return
-        types = dict(self.get_topic_names_and_types())
+        graph = None
         for topic in self.wanted:
-            if topic in self._subs or topic not in types:
+            if topic in self._subs:
+                self._adapt_qos(topic)
                 continue
-            msgtype = types[topic][0]
+            msgtype = self.types[topic]
+            if msgtype is None:
+                graph = graph if graph is not None else dict(self.get_topic_names_and_types())
+                if topic not in graph:
+                    continue
+                msgtype = graph[topic][0]
             try:
-                cls = message_class(msgtype)
                 self.writer.add_topic(topic, msgtype)
+                self._subscribe(topic, msgtype)
             except BagError as err:
                 self.get_logger().error(str(err))
                 self._subs[topic] = None  # do not retry every 0.2 s
                 continue
-            infos = self.get_publishers_info_by_topic(topic)
-            best_effort = any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos)
-            qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT if best_effort
-                             else ReliabilityPolicy.RELIABLE)
-            self._subs[topic] = self.create_subscription(cls, topic, self._writer_for(topic), qos, raw=True)
             self.get_logger().info(f"recording {topic} ({msgtype})")
+
+    def _subscribe(self, topic: str, msgtype: str) -> None:
+        best = topic in self._best_effort
+        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT if best
+                         else ReliabilityPolicy.RELIABLE)
+        self.types[topic] = msgtype
+        self._subs[topic] = self.create_subscription(message_class(msgtype), topic, self._writer_for(topic), qos,
+                                                     raw=True)
+
+    def _adapt_qos(self, topic: str) -> None:
+        """A reliable subscription does not match a best-effort publisher: switch once one appears."""
+        if self._subs[topic] is None or topic in self._best_effort:
+            return
+        infos = self.get_publishers_info_by_topic(topic)
+        if any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos):
+            self._best_effort.add(topic)
+            self.destroy_subscription(self._subs[topic])
+            self._subscribe(topic, self.types[topic])
+            self.get_logger().info(f"{topic}: best-effort publisher found, subscription switched to best effort")
 
     def _writer_for(self, topic: str):
         def write(data: bytes) -> None:
@@ -85,7 +117,8 @@ class RecordNode(Node):
 
 def _parse(argv: list[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="hyst_bag_record", description=__doc__.split("\n\n")[0])
-    ap.add_argument("topics", nargs="*", default=list(DEFAULT_TOPICS), help="topics (default: %(default)s)")
+    ap.add_argument("topics", nargs="*", default=list(DEFAULT_TOPICS),
+                    help="TOPIC or TOPIC:pkg/msg/Type (default: %(default)s)")
     ap.add_argument("-o", "--output", type=Path, default=None,
                     help="bag directory to create (default: bags/hyst_<date>_<time>)")
     ap.add_argument("--duration", type=float, default=None, help="stop after this many seconds")

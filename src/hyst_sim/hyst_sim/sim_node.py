@@ -9,8 +9,12 @@ names and strengths loaded from ``scenario_file`` — never appear on a topic, i
 Modes
 -----
 ``realtime``
-    A timer at ``rate`` takes one sample per period with the latest command, stamped with the node clock. No
-    command for ``command_timeout`` s → the voltage ramps to ``v_safe`` at ``safe_ramp_rate`` V/s.
+    A sampling thread takes one sample per period ``1/rate`` with the latest command, stamped with the node
+    clock; the executor thread only handles commands and parameters. (A thread, not an rclpy timer: measured
+    here, a SingleThreadedExecutor timer does not hold 1 kHz on a loaded 2-core machine and EventsExecutor
+    timers do not fire at all.) When it falls behind by more than a period it skips the missed samples and
+    counts them (``missed_periods`` on /diagnostics) instead of bursting. No command for ``command_timeout`` s
+    → the voltage ramps to ``v_safe`` at ``safe_ramp_rate`` V/s.
 ``lockstep`` (deterministic tests)
     Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has a
     subscriber and ``/stage/command`` a publisher, and re-published with the *same* stamp every 0.5 s until it
@@ -21,6 +25,7 @@ Modes
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass
 
@@ -30,7 +35,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
                                 SetParametersResult)
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -117,8 +122,7 @@ class SimNode(Node):
         self._pub = self.create_publisher(JointState, "/stage/state", 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(JointState, "/stage/command", self._on_command, 10)
-        self._cmd = None                 # last commanded voltage (V)
-        self._cmd_wall = None            # monotonic time it arrived
+        self._cmd = None                 # (last commanded voltage V, monotonic arrival time), one object: atomic
         self._k = 0                      # samples taken
         self._stamp_ns = 0               # lockstep clock (ns)
         self._last_msg: JointState | None = None
@@ -127,10 +131,13 @@ class SimNode(Node):
                                       "timeouts", "late_ticks"), 0)
         self._period_counts = dict(self._counts)
         self._timed_out = False
-        self._last_tick = None
+        self._lock = threading.Lock()    # the plant is stepped by the sampler and reconfigured by the executor
+        self._stop = threading.Event()
         self._timer = None
+        self._sampler = None
         if self._settings.mode == "realtime":
-            self._timer = self.create_timer(self._settings.dt, self._tick)
+            self._sampler = threading.Thread(target=self._sample_loop, name="hyst_sim_sampler", daemon=True)
+            self._sampler.start()
         else:
             self._timer = self.create_timer(0.01, self._announce)
             self._announce_at = 0.0
@@ -143,7 +150,8 @@ class SimNode(Node):
     # Parameters ---------------------------------------------------------------------------------------------
     def _declare_parameters(self) -> None:
         d = self.declare_parameter
-        d("profile", "pea", ParameterDescriptor(description="actuator profile: pea (0-150 V) | gma (+-5 V)"))
+        d("profile", "pea", ParameterDescriptor(description="actuator profile: pea (0-150 V) | gma (+-5 V)",
+                                                additional_constraints="one of: pea, gma"))
         prof = get_profile(self.get_parameter("profile").value)
         d("rate", 1000.0, ParameterDescriptor(description="sample rate (Hz); 2000 needs a single process",
                                               floating_point_range=_fp(1.0, 5000.0)))
@@ -162,7 +170,8 @@ class SimNode(Node):
                                                        floating_point_range=_fp(1e-3, 1e8)))
         d("frame_id", "stage", ParameterDescriptor(description="header.frame_id of /stage/state"))
         d("mode", "realtime", ParameterDescriptor(
-            description="realtime | lockstep (one sample per answered state; deterministic)", read_only=True))
+            description="realtime | lockstep (one sample per answered state; deterministic)", read_only=True,
+            additional_constraints="one of: realtime, lockstep; fixed at start"))
         d("params_file", "", ParameterDescriptor(description="MBW params file ('' = embedded default stage)"))
         d("scenario_file", "", ParameterDescriptor(
             description="hidden-effects scenario file ('' = none); its contents are never reported"))
@@ -208,12 +217,10 @@ class SimNode(Node):
         return SetParametersResult(successful=True)
 
     def _after_set(self, params) -> None:
-        old, new = self._settings, self._read_settings()
-        self._settings = new
-        self._plant.reconfigure(plant_config(new))
-        if new.mode == "realtime" and new.rate != old.rate:
-            self.destroy_timer(self._timer)
-            self._timer = self.create_timer(new.dt, self._tick)
+        new = self._read_settings()
+        with self._lock:
+            self._plant.reconfigure(plant_config(new))
+            self._settings = new
         self.get_logger().info("parameters applied: " + ", ".join(
             p.name for p in params if not p.name.startswith(("scenario_file",))))
 
@@ -225,7 +232,7 @@ class SimNode(Node):
             return
         v = float(msg.effort[0])
         if self._settings.mode == "realtime":
-            self._cmd, self._cmd_wall = v, time.monotonic()
+            self._cmd = (v, time.monotonic())
             return
         last = self._last_msg
         if last is None or (msg.header.stamp.sec, msg.header.stamp.nanosec) != (last.header.stamp.sec,
@@ -237,13 +244,14 @@ class SimNode(Node):
         self._sample(v, _time_from_ns(self._stamp_ns))
 
     def _sample(self, v_cmd: float, stamp: Time) -> None:
-        s = self._settings
-        try:
-            r = self._plant.step(v_cmd)
-        except SimError as err:  # a diverging user model: say so once per second, keep the node alive
-            self.get_logger().error(str(err), throttle_duration_sec=1.0)
-            self._plant.reset(self._plant.u_applied if s.v_min <= self._plant.u_applied <= s.v_max else None)
-            return
+        with self._lock:
+            s = self._settings
+            try:
+                r = self._plant.step(v_cmd)
+            except SimError as err:  # a diverging user model: say so once per second, keep the node alive
+                self.get_logger().error(str(err), throttle_duration_sec=1.0)
+                self._plant.reset()
+                return
         self._k += 1
         self._count("samples")
         if r.clipped:
@@ -265,17 +273,42 @@ class SimNode(Node):
         self._last_msg = msg
         self._pub.publish(msg)
 
+    def _sample_loop(self) -> None:
+        """Realtime mode: one sample per period on a fixed schedule; skip (and count) periods when behind."""
+        due = time.monotonic()
+        while not self._stop.is_set():
+            dt = self._settings.dt
+            due += dt
+            wait = due - time.monotonic()
+            if wait > 0:
+                if self._stop.wait(wait):
+                    return
+            elif wait < -dt:
+                missed = int(-wait / dt)
+                self._count("late_ticks", missed)
+                due += missed * dt
+            try:
+                self._tick()
+            except Exception as err:  # never let the sampler die silently  # noqa: BLE001
+                if not self.context.ok():  # shutting down (SIGINT/SIGTERM): stop quietly
+                    return
+                self.get_logger().error(f"sampling failed: {err}", throttle_duration_sec=1.0)
+
+    def destroy_node(self) -> None:
+        self._stop.set()
+        if self._sampler is not None and self._sampler.is_alive():
+            self._sampler.join(timeout=2.0)
+        super().destroy_node()
+
     def _tick(self) -> None:
         s = self._settings
         now = time.monotonic()
-        if self._last_tick is not None and now - self._last_tick > 1.5 * s.dt:
-            self._count("late_ticks", int((now - self._last_tick) / s.dt - 0.5))
-        self._last_tick = now
-        if self._cmd is not None and now - self._cmd_wall <= s.command_timeout:
-            v = self._cmd
+        cmd = self._cmd
+        if cmd is not None and now - cmd[1] <= s.command_timeout:
+            v = cmd[0]
             self._timed_out = False
         else:
-            if self._cmd is not None and not self._timed_out:
+            if cmd is not None and not self._timed_out:
                 self._timed_out = True
                 self._count("timeouts")
                 self.get_logger().warning(f"no command for {s.command_timeout:g} s: ramping to v_safe = "
@@ -343,6 +376,20 @@ class SimNode(Node):
         return dict(self._counts)
 
 
+def usage() -> str:
+    """Help text: the module description and every parameter with its range (from the one declaration table)."""
+    lines = ["usage: hyst_sim_node [--ros-args -p NAME:=VALUE ...]", "", __doc__.split("\n\nModes")[0].strip(), "",
+             "parameters (shared with the driver unless marked sim):",
+             "  rate [Hz] 1000 (1..5000)   profile pea|gma   v_min, v_max, v_safe [V] (profile defaults)",
+             "  slew_max [V/s]   command_timeout [s] 0.2   safe_ramp_rate [V/s] 100 (sim)   frame_id 'stage'",
+             "  mode realtime|lockstep (sim)   params_file (sim)   scenario_file (sim, hidden)   seed (sim)",
+             "effects (sim; 0 = off):"]
+    for name in EFFECT_NAMES:
+        spec = Effects.spec(name)
+        lines.append(f"  effects.{name:<13} {spec.doc} [{spec.unit or '-'}], range {spec.lower:g}..{spec.upper:g}")
+    return "\n".join(lines)
+
+
 def _time_from_ns(ns: int) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
@@ -351,15 +398,21 @@ def main(args=None) -> int:
     """Console script ``hyst_sim_node`` (``--ros-args -p rate:=2000.0 -p mode:=lockstep ...``)."""
     import sys
 
+    from rclpy.utilities import remove_ros_args
+
+    user_args = remove_ros_args(args if args is not None else sys.argv)[1:]
+    if user_args:
+        if set(user_args) & {"-h", "--help"}:
+            print(usage())
+            return 0
+        print(f"hyst_sim_node: unexpected argument(s) {' '.join(user_args)}; settings are ROS parameters "
+              "(--ros-args -p name:=value); see --help", file=sys.stderr)
+        return 2
     rclpy.init(args=args)
     node = None
     try:
         node = SimNode()
-        try:
-            from rclpy.experimental import EventsExecutor
-            executor = EventsExecutor()
-        except ImportError:  # pragma: no cover - older rclpy
-            executor = rclpy.executors.SingleThreadedExecutor()
+        executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

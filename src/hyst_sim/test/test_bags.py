@@ -49,9 +49,9 @@ def _synthetic_bag(path: Path) -> list:
     msgs = []
     with RawBagWriter(path) as w:
         w.add_topic("/stage/state", "sensor_msgs/msg/JointState")
-        w.add_topic("/stage/command", "std_msgs/msg/Float64")
+        w.add_topic("/test/scalar", "std_msgs/msg/Float64")
         for k, t in enumerate(TIMES):
-            topic = "/stage/state" if k % 3 else "/stage/command"
+            topic = "/stage/state" if k % 3 else "/test/scalar"
             data = _state(k) if k % 3 else _float(k)
             w.write(topic, T0 + int(t * 1e9), data)
             msgs.append((topic, int(t * 1e9), data))
@@ -65,8 +65,8 @@ def test_raw_bag_round_trip_and_refusals(tmp_path):
     assert "zstd" in (bag / "metadata.yaml").read_text() or b"zstd" in next(bag.glob("*.mcap")).read_bytes()
     got = list(read_raw(bag))
     assert [(m.topic, m.t_ns - T0, m.data) for m in got] == msgs
-    assert bag_topics(bag) == {"/stage/state": "sensor_msgs/msg/JointState", "/stage/command": "std_msgs/msg/Float64"}
-    assert [m.topic for m in read_raw(bag, ["/stage/command"])] == ["/stage/command"] * 3
+    assert bag_topics(bag) == {"/stage/state": "sensor_msgs/msg/JointState", "/test/scalar": "std_msgs/msg/Float64"}
+    assert [m.topic for m in read_raw(bag, ["/test/scalar"])] == ["/test/scalar"] * 3
     with pytest.raises(BagError, match="no topic"):
         list(read_raw(bag, ["/nope"]))
     with pytest.raises(BagError, match="exists"):
@@ -87,9 +87,11 @@ def test_record_then_play_round_trip_keeps_timing(tmp_path):
     rclpy.init(context=ctx)
     ex = SingleThreadedExecutor(context=ctx)
     writer = RawBagWriter(tmp_path / "out")
-    rec = RecordNode(writer, ["/stage/state", "/stage/command"], context=ctx)
-    play = PlayNode(list(read_raw(src)), rate=1.0, wait_for_subscribers=10.0, delay=0.3, context=ctx)
+    rec = play = None
     try:
+        # /stage/state has a contract type (subscribed at once); /test/scalar is found through the ROS graph
+        rec = RecordNode(writer, ["/stage/state", "/test/scalar"], context=ctx)
+        play = PlayNode(list(read_raw(src)), rate=1.0, wait_for_subscribers=10.0, delay=0.3, context=ctx)
         ex.add_node(rec)
         ex.add_node(play)
         end = time.monotonic() + 5.0                       # let the recorder discover both topics first
@@ -103,11 +105,13 @@ def test_record_then_play_round_trip_keeps_timing(tmp_path):
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=0.01)
     finally:
-        play.stop()
         writer.close()
         ex.shutdown()
-        rec.destroy_node()
-        play.destroy_node()
+        for node in (play, rec):
+            if node is not None:
+                if node is play:
+                    play.stop()
+                node.destroy_node()
         rclpy.try_shutdown(context=ctx)
     got = list(read_raw(tmp_path / "out"))
     assert play.published == len(msgs)

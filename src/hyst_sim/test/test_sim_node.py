@@ -182,3 +182,44 @@ def test_hidden_scenario_is_applied_but_never_echoed(rig_factory, tmp_path, capf
     y = [m.position[0] for m in rig.states]
     assert max(abs(v) for v in y[1:3]) < 50e-9                  # the delay shows in the data only
     assert not math.isnan(y[-1])
+
+
+@pytest.mark.slow
+def test_console_script_exits_cleanly_on_sigterm_and_refuses_bad_parameters():
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    exe = str(Path(sys.executable).with_name("hyst_sim_node"))
+    helped = subprocess.run([exe, "--help"], capture_output=True, timeout=60)
+    assert helped.returncode == 0 and b"effects.creep" in helped.stdout
+    bad = subprocess.run([exe, "--ros-args", "-p", "rate:=0.0"], capture_output=True, timeout=60)
+    assert bad.returncode == 2 and b"rate" in bad.stderr and b"Traceback" not in bad.stderr
+    bad = subprocess.run([exe, "--ros-args", "-p", "v_min:=-3.0"], capture_output=True, timeout=60)
+    assert bad.returncode == 2 and b"v_min" in bad.stderr and b"Traceback" not in bad.stderr
+    proc = subprocess.Popen([exe, "--ros-args", "-p", "rate:=500.0"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=dict(os.environ))
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("probe", context=ctx)
+    got = []
+    node.create_subscription(JointState, "/stage/state", got.append, 100)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        end = time.monotonic() + 20.0
+        while len(got) < 50 and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=10)               # a hang here was a real bug (EventsExecutor ignores SIGTERM)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert len(got) >= 50 and got[-1].name == ["stage"]
+    assert proc.returncode == 0
+

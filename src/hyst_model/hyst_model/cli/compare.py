@@ -20,9 +20,10 @@ from typing import Any
 
 import numpy as np
 
+from ..diagnose.report import findings
 from ..errors import DataError, HystError
 
-__all__ = ["register", "run", "compare_record", "summary_text"]
+__all__ = ["register", "run", "compare_record", "summary_text", "findings"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -111,89 +112,6 @@ def _um(x: float) -> str:
 
 def _pct(x: float) -> str:
     return f"{x:6.1f} %" if np.isfinite(x) else "   n/a"
-
-
-def findings(st) -> list[str]:
-    """Plain-language observations from the stats (what a lab user should look at first)."""
-    out: list[str] = []
-    o = st.overall
-    noise = st.noise_sigma
-    if noise > 0 and o.rmse < 1.25 * noise:
-        out.append(f"The residual ({_um(o.rmse)} RMS) is at the sensor noise level ({_um(noise)}): "
-                   "nothing left to explain.")
-    elif noise > 0 and o.rmse < 3.0 * noise:
-        out.append(f"The residual ({_um(o.rmse)} RMS) is {o.rmse / noise:.1f}× the output noise ({_um(noise)}): "
-                   "small, but the tests below say whether it is structured.")
-    if o.rmse > 0 and abs(o.bias) > 0.7 * o.rmse:
-        out.append(f"{100 * (o.bias / o.rmse) ** 2:.0f} % of the error power is a constant offset ({_um(o.bias)}): "
-                   "check the fitted offset / the sensor zero.")
-    segs = [s for s in st.segments if s.fit.n >= 10 and np.isfinite(s.fit.rmse)]
-    if len(segs) > 1:
-        w = max(segs, key=lambda s: s.fit.rmse)
-        if w.fit.rmse > 1.5 * o.rmse:
-            out.append(f"The error concentrates in segment '{w.label}' ({w.t0:.3g}–{w.t1:.3g} s): "
-                       f"{_um(w.fit.rmse)} RMS vs {_um(o.rmse)} overall.")
-        sines = sorted((s for s in segs if s.kind == "sine"), key=lambda s: s.freq)
-        if len(sines) >= 2 and sines[-1].fit.rmse > 1.5 * sines[0].fit.rmse:
-            out.append(f"The error grows with frequency ({sines[0].freq:.3g} Hz: {_um(sines[0].fit.rmse)}, "
-                       f"{sines[-1].freq:.3g} Hz: {_um(sines[-1].fit.rmse)}): rate dependence or dynamics.")
-        for h in (s for s in segs if s.kind == "hold"):
-            if abs(h.fit.bias) > 0.7 * h.fit.rmse and abs(h.fit.bias) > max(3 * noise, 0.5 * o.rmse):
-                where = "above" if h.fit.bias > 0 else "below"
-                out.append(f"While the input is held ({h.label}, {h.t0:.3g}–{h.t1:.3g} s) the measured output sits "
-                           f"{_um(abs(h.fit.bias))} {where} the model: the rest level differs (offset, creep or "
-                           "drift, or an input history before the record that the model does not know).")
-    for r in st.extra.get("ringing") or []:
-        out.append(f"After the step at t = {r['t']:.4g} s the output rings at ≈{r['freq']:.3g} Hz "
-                   f"({_um(r['rms'])} RMS in the first 50 ms): a resonance of the stage the model lacks "
-                   "(try the dynamics effect; sample fast enough to see it).")
-    hm = st.extra.get("harmonics")
-    if hm and hm["share"] > 0.3:
-        amp = np.asarray(hm["amplitudes"])
-        top = np.argsort(amp)[::-1][:3]
-        odd = float(np.sum(amp[0::2] ** 2))
-        even = float(np.sum(amp[1::2] ** 2))
-        kind = ("mostly odd harmonics: a symmetric loop-shape error" if odd > 2 * even else
-                "mostly even harmonics: an asymmetric loop (different rising/falling or top/bottom curvature)"
-                if even > 2 * odd else "odd and even harmonics: shape and asymmetry errors")
-        out.append(f"{100 * hm['share']:.0f} % of the residual during the {hm['freq']:.3g} Hz sine repeats with the "
-                   "drive (" + ", ".join(f"{k + 1}× {_um(amp[k])}" for k in top) + f"): {kind}, not noise.")
-    br = st.branches
-    r, f = br["rising"], br["falling"]
-    if r.n > 10 and f.n > 10 and np.isfinite(r.bias) and np.isfinite(f.bias):
-        orient = st.extra.get("loop_orientation", 0)
-        if abs(r.bias - f.bias) > 0.5 * o.rmse and o.rmse > 0 and orient:
-            wide = "wider" if (f.bias - r.bias) * orient > 0 else "narrower"
-            out.append(f"Rising and falling branches carry opposite mean errors ({_um(r.bias)} vs {_um(f.bias)}): "
-                       f"the measured loop is {wide} than the model's.")
-    lv = [f for _, _, f in st.levels if f.n >= 10]
-    if len(lv) >= 3 and np.isfinite(lv[0].bias) and np.isfinite(lv[-1].bias):
-        if abs(lv[0].bias - lv[-1].bias) > 0.5 * o.rmse and np.sign(lv[0].bias) != np.sign(lv[-1].bias):
-            out.append(f"The mean error changes sign from low to high input ({_um(lv[0].bias)} → "
-                       f"{_um(lv[-1].bias)}): a gain or end-point error, possibly asymmetry or saturation.")
-    bands = [b for b in st.bands if np.isfinite(b.rmse)]
-    if bands and o.rmse > 0:
-        b = max(bands, key=lambda b: b.rmse)
-        share = (b.rmse / o.rmse) ** 2
-        if share > 0.5:
-            out.append(f"{100 * share:.0f} % of the residual power lies in {b.f_lo:.3g}–{b.f_hi:.3g} Hz.")
-    if st.cross.significant:
-        lag = st.cross.lag_at_max * (1.0 / st.fs)
-        when = "past" if lag >= 0 else "future"
-        out.append(f"The residual is correlated with the input (max {st.cross.max_abs:.2f} at {lag * 1e3:.3g} ms, "
-                   f"{when} inputs; bound ±{st.cross.bound:.3f}): input-driven behaviour the model lacks.")
-    ho = {k: c for k, c in st.higher.items() if c.significant}
-    words = {"e2_u": "the error size follows the input level",
-             "e_u2": "an even (quadratic) input term is missing — asymmetry or saturation",
-             "e_absdu": "the error follows the input speed |du/dt| — rate dependence or dynamics",
-             "e2_u2": "the error size follows the input magnitude"}
-    for k in ("e_u2", "e_absdu", "e2_u", "e2_u2"):
-        if k in ho:
-            out.append(f"Higher-order test {k} ({ho[k].max_abs:.2f} > ±{ho[k].bound:.3f}, i.e. about "
-                       f"{100 * ho[k].max_abs ** 2:.0f} % of the residual variance): {words[k]}.")
-    if not st.auto.significant:
-        out.append("The residual is white within the 99 % bounds.")
-    return out
 
 
 def summary_text(st, title: str = "") -> str:

@@ -26,7 +26,8 @@ def register(subparsers) -> None:
     p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
                    help="Python file defining extra Effect classes (repeatable)")
     p.add_argument("--report", metavar="DIR", help="write an HTML report with plots into DIR")
-    p.add_argument("--force", action="store_true", help="allow --report to replace an existing report")
+    p.add_argument("--out", metavar="P", help="write the best model of the error ladder as a params file")
+    p.add_argument("--force", action="store_true", help="allow --report/--out to replace existing output")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--quiet", action="store_true", help="no progress display on stderr")
     from .fit import add_data_options
@@ -63,7 +64,8 @@ def _text(d, source: str) -> str:
     lines.append(d.explanation)
     if d.missing != "none":
         eff = ",".join(d.ladder[-1].effects)
-        lines.append(f"next: hyst fit DATA --model {d.base} --effects {eff} --out params.yaml")
+        lines.append(f"next: hyst diagnose DATA --out params.yaml saves {d.ladder[-1].model} as fitted here "
+                     f"(or refit it: hyst fit DATA --model {d.base} --effects {eff})")
     return "\n".join(lines)
 
 
@@ -81,6 +83,13 @@ def run(args: argparse.Namespace) -> int:
         raise EffectError("--effects lists an effect twice")
     rec = load_checked(args)
     d = diagnose(rec.t, rec.u, rec.y, base=args.base, effects=names, progress=not args.quiet)
+    out_path = None
+    if args.out:
+        from ..io import spec_from_model, write_params
+        best = d.ladder[-1]
+        model, theta = d.models[best.model]
+        prov = {"method": "diagnose", "rmse": best.rmse, "rmse_train": best.rmse_train, "data": str(args.data)}
+        out_path = str(write_params(args.out, spec_from_model(model, theta, fit=prov, dt=rec.dt), force=args.force))
     report_path = None
     if args.report:
         try:
@@ -101,9 +110,12 @@ def run(args: argparse.Namespace) -> int:
         obj = _clean(d.to_json())
         obj["data"] = rec.source
         obj["report"] = report_path
+        obj["params_file"] = out_path
         print(json.dumps(obj, allow_nan=False))
     else:
         print(_text(d, rec.source))
         if report_path:
             print(f"report: {report_path}")
+        if out_path:
+            print(f"params: {out_path} ({d.ladder[-1].model})")
     return 0

@@ -27,6 +27,8 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--units", help="units of those columns, e.g. s,V,um (default: from the name suffix, else SI)")
     p.add_argument("--gaps", choices=("error", "longest"), default="error",
                    help="lost samples in the record: stop with an error (default) or keep the longest regular part")
+    p.add_argument("--salvage", action="store_true",
+                   help="read an MCAP bag whose recorder was killed (no footer) up to its damaged end")
     p.add_argument("--resample", type=float, metavar="HZ",
                    help="resample to this rate before fitting (MBW's δ and rate terms are per sample)")
 
@@ -48,7 +50,10 @@ def load_checked(args) -> "Record":  # noqa: F821
     """Read DATA per the data options and check it; returns a regular, finite record in SI units."""
     from ..io import load_record
     from ..io.record import Record
-    rec = load_record(args.data, topic=args.topic, columns=args.columns, units=args.units)
+    rec = load_record(args.data, topic=args.topic, columns=args.columns, units=args.units,
+                      salvage=getattr(args, "salvage", False))
+    if rec.meta.get("salvaged"):
+        print(f"hyst: note: {args.data} is damaged; salvaged {len(rec)} samples before the damage", file=sys.stderr)
     if args.gaps == "longest":
         rec = rec.longest_segment()
         if rec.meta.get("dropped_samples"):

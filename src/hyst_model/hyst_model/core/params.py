@@ -12,7 +12,8 @@ import numpy as np
 
 from .mbw import PARAM_NAMES, mbw_rest_state, mbw_simulate
 
-__all__ = ["MBWParams", "BOUNDS", "TABLE31_BOUNDS", "THESIS_FIG37", "THESIS_FIG38", "THESIS_TABLE41", "from_continuous", "pea_default"]
+__all__ = ["MBWParams", "BOUNDS", "TABLE31_BOUNDS", "THESIS_FIG37", "THESIS_FIG38", "THESIS_TABLE41",
+           "from_continuous", "pea_default"]
 
 #: Thesis Table 3.1: EPSO search bounds of the six shape parameters (used by ``method='epso'``).
 TABLE31_BOUNDS: dict[str, tuple[float, float]] = {

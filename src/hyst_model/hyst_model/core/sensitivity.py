@@ -19,7 +19,7 @@ from numba import njit
 
 from .mbw import mbw_step
 
-__all__ = ["mbw_simulate_sens", "mbw_rest_state_sens"]
+__all__ = ["mbw_simulate_sens", "mbw_rest_state_sens", "mbw_normal_equations"]
 
 
 @njit(cache=True)
@@ -90,3 +90,50 @@ def mbw_simulate_sens(p: np.ndarray, u: np.ndarray, y0: float, S0: np.ndarray):
         yp = yk
         up = u[k]
     return y, S
+
+
+@njit(cache=True)
+def mbw_normal_equations(p: np.ndarray, un: np.ndarray, y0: float, S0: np.ndarray, cols: np.ndarray,
+                         y_scale: float, offset: float, a: int, target: np.ndarray, inv_scale: float):
+    """Gauss-Newton normal equations of the free-run output error, fused into one pass over the record.
+
+    Residual r_k = (y_scale·y_k + offset − target_{k−a})·inv_scale for k ≥ a; parameters are the recursion
+    parameters listed in ``cols`` (indices into the 8) followed by the offset. Returns ``(H, g, rr)`` with
+    H = JᵀJ, g = Jᵀr, rr = rᵀr (inf when the simulation diverges) without storing the n × p Jacobian.
+    """
+    n = un.shape[0]
+    m = cols.shape[0]
+    p_all = m + 1
+    H = np.zeros((p_all, p_all))
+    g = np.zeros(p_all)
+    jrow = np.empty(p_all)
+    Sp = S0.copy()
+    Sk = np.empty(8)
+    yp = y0
+    up = un[0] if n else 0.0
+    rr = 0.0
+    for k in range(n):
+        yk = mbw_step(p, yp, un[k], up)
+        _sens_step(p, yp, un[k], up, Sp, Sk)
+        Sp[:] = Sk
+        yp = yk
+        up = un[k]
+        if k < a:
+            continue
+        r = (y_scale * yk + offset - target[k - a]) * inv_scale
+        if not np.isfinite(r):
+            return H, g, np.inf
+        rr += r * r
+        for i in range(m):
+            jrow[i] = y_scale * inv_scale * Sk[cols[i]]
+        jrow[m] = inv_scale
+        for i in range(p_all):
+            g[i] += jrow[i] * r
+            for j in range(i, p_all):
+                H[i, j] += jrow[i] * jrow[j]
+    for i in range(p_all):
+        for j in range(i):
+            H[i, j] = H[j, i]
+    if not np.all(np.isfinite(H)):
+        return H, g, np.inf
+    return H, g, rr

@@ -9,11 +9,12 @@ The engine (:func:`diagnose`)
 2. estimates the sensor noise floor from the measured output (second differences, robust) — the best any model
    can do;
 3. fits the base model (``mbw`` or ``bw``) with :func:`hyst_model.identify.fit`;
-4. for every candidate effect computes its residual signature (a score and a sentence of evidence) and refits
-   base + effect from the base fit and the effect's data-driven start. Records longer than ``screen_samples``
-   are screened on a decimated copy first and only the ``full_rate_top`` best are refitted at full rate;
+4. for every candidate effect computes its residual signature (a score and a sentence of evidence) and screens
+   it: the effect's few parameters (and the offset) fitted from its data-driven start on top of the base model
+   held fixed (:class:`Fixed`) — cheap at full rate, where the per-sample base parameters stay valid (decimating
+   would change them). The ``full_rate_top`` best are then refitted jointly with the base (:func:`refit`);
 5. ranks candidates by validation RMSE, calls one *significant* only if it cuts the validation RMSE by at least
-   ``min_factor`` and the per-block squared-error reduction is significant (paired t > ``t_min`` over 20
+   ``min_factor`` and the per-chunk squared-error reduction is significant (robust paired t > ``t_min`` over 40
    validation chunks), and reports ``"none"`` when the baseline is already at the noise floor or nothing is
    significant — no false alarms;
 6. builds the error ladder greedily: base → + best effect → + the next effect that still helps … with the
@@ -31,7 +32,6 @@ import numpy as np
 
 from ..errors import DataError, EffectError, FitError
 from ..effects import EFFECTS, compose
-from ..effects.compose import Frozen
 from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len, noise_floor, sample_time
 from ..model import Model
@@ -79,6 +79,7 @@ class Candidate:
     evidence: str
     t_stat: float = 0.0
     params: dict = field(default_factory=dict)
+    on_top_of: list = field(default_factory=list)
 
 
 @dataclass
@@ -114,6 +115,7 @@ class Diagnosis:
             "noise_floor": self.noise,
             "candidates": [{"effect": c.effect, "rmse": c.rmse, "improvement": c.improvement,
                             "significant": c.significant, "score": c.score, "t_stat": c.t_stat,
+                            "on_top_of": c.on_top_of,
                             "evidence": c.evidence,
                             "params": c.params} for c in self.candidates],
             "missing": self.missing,
@@ -179,15 +181,17 @@ def default_fitter(model: Model, t, u, y, theta0: np.ndarray | None) -> np.ndarr
 
 
 def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_base: np.ndarray,
-          carry: dict | None = None, fitter=None, two_stage: bool = True
+          carry: dict | None = None, fitter=None, two_stage: bool = True, prior: dict | None = None
           ) -> tuple[ComposedModel, np.ndarray, np.ndarray]:
     """Fit base + effects in two stages; return (model, θ, free-run prediction).
 
-    1. Each effect's data-driven start (:meth:`Effect.start` on the base model's residual), overridden by
-       ``carry`` (namespaced values from an earlier fit, e.g. the screening level — effect parameters are
-       physical, so they carry across sample rates; base parameters do not);
-    2. the base refitted with the effects frozen at those values (a base fitted without an effect is distorted
-       by it, and a joint fit from there can stall);
+    1. Each effect's data-driven start (:meth:`Effect.start` on the base model's residual) — parameters it does
+       not provide come from ``prior`` (e.g. the screening level's fit: effect parameters are physical, so they
+       carry across sample rates; base parameters do not) — overridden by ``carry`` (values of an earlier fit
+       at this rate, e.g. the previous rung of the ladder);
+    2. for input-side effects (delay), the base refitted on the input as the effect transforms it at its start
+       (a base fitted without the effect is distorted by it — its δ terms imitate a delay — and a joint fit
+       from there stalls in that basin);
     3. everything jointly from there.
 
     With ``two_stage=False`` step 2 is skipped — for refits whose effect parameters are already good (carried
@@ -195,6 +199,12 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
     """
     fitter = fitter or default_fitter
     m = compose(base_model, list(names), cfg)
+    if prior:  # lowest precedence: values an effect's own start does not provide
+        nm = m.names
+        for e in m.effects:
+            pre = {p.name: prior[f"{e.name}.{p.name}"] for p in e.params() if f"{e.name}.{p.name}" in prior}
+            base_start = e.start
+            e.start = (lambda f, pre: lambda *a: {**pre, **(f(*a) or {})})(base_start, pre)
     th0 = m.start(t, u, y, theta_base)
     if carry:
         nm = m.names
@@ -204,11 +214,15 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
         lo, hi = m.bounds
         th0 = np.clip(th0, lo, hi)
     th1 = th0
-    if two_stage:
-        tb, tes = m.split(th0)
-        frozen = ComposedModel(base_model, [Frozen(e, te) for e, te in zip(m.effects, tes)])
+    inputs = [(e, te) for e, te in zip(m.effects, m.split(th0)[1]) if e.kind == "input"]
+    if two_stage and inputs:
+        # The base around the input effects at their start: the base alone on the transformed input, with
+        # the base model's own fast fitter (equation-error starts, exact Jacobian).
+        uu = u
+        for e, te in inputs:
+            uu = e.input(te, t, uu)
         th1 = th0.copy()
-        th1[: tb.size] = fitter(frozen, t, u, y, None)
+        th1[: len(base_model.names)] = fitter(base_model, t, uu, y, None)
     th = fitter(m, t, u, y, th1)
     return m, th, _simulate(m, th, t, u)
 
@@ -250,10 +264,42 @@ def candidate_names(base_model: Model, names: Sequence[str] | None = None) -> li
     return out
 
 
+class Fixed(Model):
+    """A fitted model held fixed, except its output offset: the inner model for screening an effect on top.
+
+    Screening an effect with everything else frozen costs a few parameters' fit at full rate (the base's
+    per-sample parameters must not be decimated); the effect's own parameters plus the offset are free.
+    """
+
+    def __init__(self, model: Model, theta: np.ndarray):
+        self.model, self.theta = model, np.asarray(theta, dtype=np.float64)
+        self.name = model.name
+        self._off = model.names.index("offset") if "offset" in model.names else None
+        self._params = tuple(p for p in model.params() if p.name == "offset")
+        if self._off is not None:
+            p = self._params[0]
+            self._params = (type(p)(p.name, float(self.theta[self._off]), p.lower, p.upper, p.unit, p.doc),)
+
+    def params(self):
+        return self._params
+
+    def config(self):
+        return self.model.config()
+
+    def simulate(self, theta, t, u):
+        th = self.theta.copy()
+        if self._off is not None:
+            th[self._off] = theta[0]
+        return self.model.simulate(th, t, u)
+
+
+def _effect_values(m: Model, th: np.ndarray, only: str | None = None) -> dict:
+    return {k: v for k, v in m.unpack(th).items() if "." in k and (only is None or k.startswith(only + "."))}
+
+
 def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None, fitter=None,
              min_factor: float = 1.1, t_min: float = 3.0, noise_margin: float = 1.25,
-             screen_samples: int = 12000, full_rate_top: int = 2, max_rungs: int = 3,
-             progress: bool | Callable = False) -> Diagnosis:
+             full_rate_top: int = 2, max_rungs: int = 3, progress: bool | Callable = False) -> Diagnosis:
     """Fit ``base``, test each effect by its residual signature and a validated refit, name the missing one.
 
     Parameters
@@ -269,13 +315,11 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     min_factor : float
         A candidate must divide the validation RMSE by at least this much ...
     t_min : float
-        ... and reduce the squared error with a paired t statistic above this (20 validation chunks).
+        ... and reduce the squared error with a robust paired t statistic above this (40 validation chunks).
     noise_margin : float
         Baseline validation RMSE below ``noise_margin × noise floor`` → nothing is missing.
-    screen_samples : int
-        Longer records are screened on a decimated copy of about this many samples.
     full_rate_top : int
-        How many screened candidates are refitted at full rate (the ladder refits its rungs too).
+        How many screened candidates get the full joint refit (at each rung of the ladder).
     max_rungs : int
         Effects in the ladder at most.
     progress : bool or callable
@@ -309,8 +353,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     cfg["drift.span"] = float(t[train][-1] - t[0])  # drift knots cover the training span
     base_model = build_model(base, (), cfg)
     names = candidate_names(base_model, effects)
-    q = max(1, int(math.ceil(n / screen_samples)))
-    n_steps = 2 + len(names) + (1 if q > 1 else 0) + min(full_rate_top, len(names)) + max_rungs
+    n_steps = 1 + len(names) + full_rate_top * (1 + max_rungs)
     say = progress if callable(progress) else _Progress(bool(progress), n_steps)
     noise = noise_floor(y)
 
@@ -322,64 +365,70 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     say(f"base {base}: validation RMSE {fmt_len(base_val)}, noise floor {fmt_len(noise)}"
         + (" (at the noise floor)" if at_floor else ""), step=False)
 
-    # --- screening: every candidate, on a decimated copy of long records ----------------------------------
-    if q > 1:
-        ts, us, ys = t[::q], u[::q], y[::q]
-        say(f"screening on a 1:{q} decimated copy ({ts.size} samples)")
-        cfg_s = dict(cfg, dt=sample_time(ts))
-        bm_s = build_model(base, (), cfg_s)
-        th_s = fit_(bm_s, ts, us, ys, None)
-        vs = validation_mask(ts.size)
-        base_val_s = _rmse((ys - _simulate(bm_s, th_s, ts, us))[vs])
-    else:
-        ts, us, ys, cfg_s, bm_s, th_s, vs, base_val_s = t, u, y, cfg, base_model, th_base, val, base_val
-    e_s = ys - _simulate(bm_s, th_s, ts, us)
+    def screen_on(inner: Model, th_inner: np.ndarray, chosen: list[str], nm: str, prior: dict | None):
+        """Fit only effect ``nm`` (+ offset) on top of a fixed inner model; return (val RMSE, effect values)."""
+        if EFFECTS[nm].kind == "base":  # replaces the base recursion: only a full refit can tell
+            m, th, yh = refit(base_model, chosen + [nm], cfg, t, u, y, th_base, prior, fit_)
+            return _rmse((y - yh)[val]), _effect_values(m, th, nm), (m, th, y - yh)
+        fx = Fixed(inner, th_inner)
+        m = compose(fx, [nm], cfg)
+        th0 = m.start(t, u, y, fx.theta0)
+        if prior:
+            for k, v in prior.items():
+                if k in m.names:
+                    th0[m.names.index(k)] = v
+        th = fit_(m, t, u, y, np.clip(th0, *m.bounds))
+        return _rmse((y - _simulate(m, th, t, u))[val]), _effect_values(m, th, nm), None
+
+    # --- screening: each candidate alone on top of the fitted base ----------------------------------------
     cands: dict[str, Candidate] = {}
     carry: dict[str, dict] = {}
     full: dict[str, tuple] = {}
-    for name in names:
+    for nm in names:
         tc = time.perf_counter()
-        probe = compose(bm_s, [name], cfg_s)
+        probe = compose(base_model, [nm], cfg)
         try:
-            score, ev = probe.effects[-1].signature(ts, us, e_s, sample_time(ts))
+            score, ev = probe.effects[-1].signature(t, u, e_base, dt)
             score = float(np.clip(score, 0.0, 1.0))
         except Exception as err:  # noqa: BLE001 - a user effect's test must not sink the diagnosis
             score, ev = 0.0, f"its residual test failed ({type(err).__name__}: {err})"
         try:
-            m, th, yh = refit(bm_s, [name], cfg_s, ts, us, ys, th_s, fitter=fit_)
-            r = _rmse((ys - yh)[vs])
-            carry[name] = {k: v for k, v in m.unpack(th).items() if "." in k}
-            if q == 1:
-                full[name] = (m, th, y - yh)
-        except FitError as err:
+            r, vals, done = screen_on(base_model, th_base, [], nm, None)
+            carry[nm] = vals
+            if done is not None:
+                full[nm] = done
+        except (FitError, EffectError) as err:
             r = math.inf
-            ev = f"{ev}; refit failed: {err}"
-        cands[name] = Candidate(name, r * base_val / base_val_s if q > 1 else r, math.nan,
-                                base_val_s / r if r > 0 else math.inf, False, score, ev, params=carry.get(name, {}))
-        say(f"{base}+{name}: validation RMSE {fmt_len(r)} ({base_val_s / r:.2f}×), residual test {score:.2f}, "
-            f"{time.perf_counter() - tc:.1f} s")
+            ev = f"{ev}; the fit failed: {err}"
+        cands[nm] = Candidate(nm, r, math.nan, base_val / r if r > 0 else math.inf, False, score, ev,
+                              params=carry.get(nm, {}))
+        say(f"screen {base}+{nm}: validation RMSE {fmt_len(r)} ({base_val / r:.2f}×), residual test "
+            f"{score:.2f}, {time.perf_counter() - tc:.1f} s")
 
+    # --- full joint refit of the best screened candidates -------------------------------------------------
     order = sorted(cands.values(), key=lambda c: c.rmse)
-    if q > 1:  # full rate for the best screened candidates
-        for c in order[:full_rate_top]:
-            if not np.isfinite(c.rmse) or (at_floor and c.improvement < min_factor):
-                continue
-            try:
-                m, th, yh = refit(base_model, [c.effect], cfg, t, u, y, th_base, carry.get(c.effect), fit_,
-                                  two_stage=q == 1)
-            except FitError:
-                continue
-            full[c.effect] = (m, th, y - yh)
-            say(f"full rate {m.name}: validation RMSE {fmt_len(_rmse((y - yh)[val]))}")
-        for c in order[full_rate_top:]:
-            c.evidence += " (screened on a decimated copy only)"
-    for name, (m, th, e) in full.items():
-        c = cands[name]
-        c.rmse, c.rmse_train = _rmse(e[val]), _rmse(e[train])
+    for c in order[:full_rate_top]:
+        if c.effect in full or not np.isfinite(c.rmse) or c.improvement < 1.0:
+            continue
+        try:
+            m, th, yh = refit(base_model, [c.effect], cfg, t, u, y, th_base, None, fit_, prior=carry.get(c.effect))
+        except (FitError, EffectError):
+            continue
+        full[c.effect] = (m, th, y - yh)
+        say(f"refit {m.name}: validation RMSE {fmt_len(_rmse((y - yh)[val]))}")
+    for c in order[full_rate_top:]:
+        if c.effect not in full:
+            c.evidence += " (screened with the base model held fixed)"
+    for nm, (m, th, e) in full.items():
+        c = cands[nm]
+        r_full = _rmse(e[val])
+        if r_full > c.rmse:  # the joint fit lost to the screening fit: keep the better (screening) number
+            continue
+        c.rmse, c.rmse_train = r_full, _rmse(e[train])
         c.improvement = base_val / c.rmse if c.rmse > 0 else math.inf
         c.t_stat = _paired_t(e_base[val], e[val])
-        c.params = {k: v for k, v in m.unpack(th).items() if "." in k}
-        carry[name] = c.params
+        c.params = _effect_values(m, th)
+        carry[nm] = c.params
     for c in cands.values():
         c.significant = bool(not at_floor and c.effect in full and c.improvement >= min_factor
                              and c.t_stat >= t_min)
@@ -400,35 +449,51 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
             cur_val = _rmse(cur_e[val])
             if cur_val <= noise_margin * noise:
                 break
-            pool = [c.effect for c in ranked if c.effect not in chosen and c.improvement >= 1.02][:2]
-            trial = []
-            for nm in pool:
+            # A second effect is often masked by the first when tested alone: screen every remaining one on
+            # top of the current rung, then refit the best at full rate.
+            prev_m, prev_th = models[ladder[-1].model]
+            trial_s = []
+            for nm in names:
+                if nm in chosen:
+                    continue
                 try:
-                    cm = dict(carry.get(nm, {}))
-                    cm.update({k: v for k, v in models[ladder[-1].model][0].unpack(
-                        models[ladder[-1].model][1]).items() if "." in k})
-                    prev_m, prev_th = models[ladder[-1].model]
-                    mm, tth, yh = refit(base_model, chosen + [nm], cfg, t, u, y, prev_m.split(prev_th)[0], cm, fit_,
-                                        two_stage=nm not in carry)
+                    compose(base_model, chosen + [nm], cfg)
+                    r_s, vals, _ = screen_on(prev_m, prev_th, chosen, nm, carry.get(nm))
+                except (EffectError, FitError):
+                    continue
+                trial_s.append((r_s, nm, vals))
+                say(f"screen {prev_m.name}+{nm}: validation RMSE {fmt_len(r_s)}", step=False)
+            trial_s.sort(key=lambda x: x[0])
+            trial = []
+            for r_s, nm, vals in trial_s[:full_rate_top]:
+                if not cur_val / r_s >= 1.0:
+                    continue
+                try:
+                    mm, tth, yh = refit(base_model, chosen + [nm], cfg, t, u, y, prev_m.split(prev_th)[0],
+                                        _effect_values(prev_m, prev_th), fit_, prior=vals)
                 except (EffectError, FitError):
                     continue
                 trial.append((_rmse((y - yh)[val]), nm, mm, tth, y - yh))
-                say(f"ladder {mm.name}: validation RMSE {fmt_len(trial[-1][0])}")
+                say(f"refit {mm.name}: validation RMSE {fmt_len(trial[-1][0])}")
             if not trial:
                 break
             r, nm, mm, tth, e = min(trial, key=lambda x: x[0])
             if not (cur_val / r >= min_factor and _paired_t(cur_e[val], e[val]) >= t_min):
                 break
+            c = cands[nm]
+            c.on_top_of, c.rmse, c.rmse_train = list(chosen), r, _rmse(e[train])
+            c.improvement, c.t_stat, c.significant = cur_val / r, _paired_t(cur_e[val], e[val]), True
+            c.params = _effect_values(mm, tth, nm)
             chosen.append(nm)
             ladder.append(Rung(mm.name, list(chosen), r, _rmse(e[train])))
             models[mm.name] = (mm, tth)
-            cands[nm].significant = True
             cur_e = e
     # Best first: the ladder's effects in the order they were added, then the rest by validation RMSE.
     ranked = [cands[nm] for nm in chosen] + sorted((c for c in cands.values() if c.effect not in chosen),
                                                    key=lambda c: (not c.significant, c.rmse))
+    rung_val = {tuple(rg.effects): rg.rmse for rg in ladder}
     for c in ranked:
-        c.evidence = _explain(c, base, base_val)
+        c.evidence = _explain(c, base, rung_val.get(tuple(c.on_top_of), base_val))
     missing = chosen[0] if chosen else "none"
     if at_floor:
         expl = (f"the {base} model already predicts held-out data to {fmt_len(base_val)} RMS, at the sensor "
@@ -439,13 +504,17 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
                 f"the remaining error is none of: {', '.join(names)}")
     else:
         expl = " → ".join(f"{r.model} {fmt_len(r.rmse)}" for r in ladder)
+        left = ladder[-1].rmse
+        expl += (" (at the noise floor)" if left <= noise_margin * noise else
+                 f" (still {left / noise:.1f}× the noise floor: something else is missing too)")
     return Diagnosis(base, base_val, base_tr, noise, ranked, missing, ladder, expl, n, dt,
                      time.perf_counter() - t0, models)
 
 
 def _explain(c: Candidate, base: str, base_val: float) -> str:
-    head = (f"adding {c.effect} changes the validation RMSE from {fmt_len(base_val)} to {fmt_len(c.rmse)} "
-            f"({c.improvement:.2f}×)")
+    onto = "+".join([base] + c.on_top_of)
+    head = (f"adding {c.effect} to {onto} changes the validation RMSE from {fmt_len(base_val)} to "
+            f"{fmt_len(c.rmse)} ({c.improvement:.2f}×)")
     tail = c.evidence.split("; adding ")[0]
     verdict = "significant" if c.significant else "not significant"
     return f"{head}, {verdict}; {tail}"

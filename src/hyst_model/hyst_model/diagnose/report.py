@@ -32,12 +32,107 @@ import numpy as np
 
 from ..errors import HystError
 
-__all__ = ["write_report", "MARKER", "prepare_dir"]
+__all__ = ["write_report", "findings", "MARKER", "prepare_dir"]
 
 #: A file hyst writes into every report directory; a directory without it but with other files is not ours.
 MARKER = ".hyst-report"
 _OURS = {"index.html", "time.png", "loop.png", "residual.png", "spectrum.png", "correlation.png", "ladder.png",
          MARKER}
+
+
+def _um(x: float) -> str:
+    from ..effects.signals import fmt_len
+    return fmt_len(x) if np.isfinite(x) else "n/a"
+
+
+def findings(st) -> list[str]:
+    """Plain-language observations from :class:`~hyst_model.diagnose.stats.CompareStats` (what a lab user should
+    look at first); ``hyst compare`` prints them and the report lists them."""
+    out: list[str] = []
+    o = st.overall
+    noise = st.noise_sigma
+    if noise > 0 and o.rmse < 1.25 * noise:
+        out.append(f"The residual ({_um(o.rmse)} RMS) is at the sensor noise level ({_um(noise)}): "
+                   "nothing left to explain.")
+    elif noise > 0 and o.rmse < 3.0 * noise:
+        out.append(f"The residual ({_um(o.rmse)} RMS) is {o.rmse / noise:.1f}× the output noise ({_um(noise)}): "
+                   "small, but the tests below say whether it is structured.")
+    if o.rmse > 0 and abs(o.bias) > 0.7 * o.rmse:
+        out.append(f"{100 * (o.bias / o.rmse) ** 2:.0f} % of the error power is a constant offset ({_um(o.bias)}): "
+                   "check the fitted offset / the sensor zero.")
+    segs = [s for s in st.segments if s.fit.n >= 10 and np.isfinite(s.fit.rmse)]
+    if len(segs) > 1:
+        w = max(segs, key=lambda s: s.fit.rmse)
+        if w.fit.rmse > 1.5 * o.rmse:
+            out.append(f"The error concentrates in segment '{w.label}' ({w.t0:.3g}–{w.t1:.3g} s): "
+                       f"{_um(w.fit.rmse)} RMS vs {_um(o.rmse)} overall.")
+        sines = sorted((s for s in segs if s.kind == "sine"), key=lambda s: s.freq)
+        if len(sines) >= 2 and sines[-1].fit.rmse > 1.5 * sines[0].fit.rmse:
+            out.append(f"The error grows with frequency ({sines[0].freq:.3g} Hz: {_um(sines[0].fit.rmse)}, "
+                       f"{sines[-1].freq:.3g} Hz: {_um(sines[-1].fit.rmse)}): rate dependence or dynamics.")
+        for h in (s for s in segs if s.kind == "hold"):
+            if abs(h.fit.bias) > 0.7 * h.fit.rmse and abs(h.fit.bias) > max(3 * noise, 0.5 * o.rmse):
+                where = "above" if h.fit.bias > 0 else "below"
+                out.append(f"While the input is held ({h.label}, {h.t0:.3g}–{h.t1:.3g} s) the measured output sits "
+                           f"{_um(abs(h.fit.bias))} {where} the model: the rest level differs (offset, creep or "
+                           "drift, or an input history before the record that the model does not know).")
+    for r in st.extra.get("ringing") or []:
+        out.append(f"After the step at t = {r['t']:.4g} s the output rings at ≈{r['freq']:.3g} Hz "
+                   f"({_um(r['rms'])} RMS in the first 50 ms): a resonance of the stage the model lacks "
+                   "(try the dynamics effect; sample fast enough to see it).")
+    peaks = st.extra.get("peaks") or []
+    if peaks:
+        txt = ", ".join(f"{p['freq']:.4g} Hz ({p['ratio']:.0f}×)" for p in peaks)
+        out.append(f"The residual spectrum has peaks at {txt} above its local level: resonances or "
+                   "vibration the model does not produce (see spectrum.png; the dynamics effect models a "
+                   "resonance excited by the input).")
+    hm = st.extra.get("harmonics")
+    if hm and hm["share"] > 0.3:
+        amp = np.asarray(hm["amplitudes"])
+        top = np.argsort(amp)[::-1][:3]
+        odd = float(np.sum(amp[0::2] ** 2))
+        even = float(np.sum(amp[1::2] ** 2))
+        kind = ("mostly odd harmonics: a symmetric loop-shape error" if odd > 2 * even else
+                "mostly even harmonics: an asymmetric loop (different rising/falling or top/bottom curvature)"
+                if even > 2 * odd else "odd and even harmonics: shape and asymmetry errors")
+        out.append(f"{100 * hm['share']:.0f} % of the residual during the {hm['freq']:.3g} Hz sine repeats with the "
+                   "drive (" + ", ".join(f"{k + 1}× {_um(amp[k])}" for k in top) + f"): {kind}, not noise.")
+    br = st.branches
+    r, f = br["rising"], br["falling"]
+    if r.n > 10 and f.n > 10 and np.isfinite(r.bias) and np.isfinite(f.bias):
+        orient = st.extra.get("loop_orientation", 0)
+        if abs(r.bias - f.bias) > 0.5 * o.rmse and o.rmse > 0 and orient:
+            wide = "wider" if (f.bias - r.bias) * orient > 0 else "narrower"
+            out.append(f"Rising and falling branches carry opposite mean errors ({_um(r.bias)} vs {_um(f.bias)}): "
+                       f"the measured loop is {wide} than the model's.")
+    lv = [f for _, _, f in st.levels if f.n >= 10]
+    if len(lv) >= 3 and np.isfinite(lv[0].bias) and np.isfinite(lv[-1].bias):
+        if abs(lv[0].bias - lv[-1].bias) > 0.5 * o.rmse and np.sign(lv[0].bias) != np.sign(lv[-1].bias):
+            out.append(f"The mean error changes sign from low to high input ({_um(lv[0].bias)} → "
+                       f"{_um(lv[-1].bias)}): a gain or end-point error, possibly asymmetry or saturation.")
+    bands = [b for b in st.bands if np.isfinite(b.rmse)]
+    if bands and o.rmse > 0:
+        b = max(bands, key=lambda b: b.rmse)
+        share = (b.rmse / o.rmse) ** 2
+        if share > 0.5:
+            out.append(f"{100 * share:.0f} % of the residual power lies in {b.f_lo:.3g}–{b.f_hi:.3g} Hz.")
+    if st.cross.significant:
+        lag = st.cross.lag_at_max * (1.0 / st.fs)
+        when = "past" if lag >= 0 else "future"
+        out.append(f"The residual is correlated with the input (max {st.cross.max_abs:.2f} at {lag * 1e3:.3g} ms, "
+                   f"{when} inputs; bound ±{st.cross.bound:.3f}): input-driven behaviour the model lacks.")
+    ho = {k: c for k, c in st.higher.items() if c.significant}
+    words = {"e2_u": "the error size follows the input level",
+             "e_u2": "an even (quadratic) input term is missing — asymmetry or saturation",
+             "e_absdu": "the error follows the input speed |du/dt| — rate dependence or dynamics",
+             "e2_u2": "the error size follows the input magnitude"}
+    for k in ("e_u2", "e_absdu", "e2_u", "e2_u2"):
+        if k in ho:
+            out.append(f"Higher-order test {k} ({ho[k].max_abs:.2f} > ±{ho[k].bound:.3f}, i.e. about "
+                       f"{100 * ho[k].max_abs ** 2:.0f} % of the residual variance): {words[k]}.")
+    if not st.auto.significant:
+        out.append("The residual is white within the 99 % bounds.")
+    return out
 
 
 def prepare_dir(path: str | os.PathLike, force: bool = False) -> Path:
@@ -144,24 +239,23 @@ def _plots(d: Path, t, u, y, yhat, st, ladder) -> list[tuple[str, str]]:
     _save(fig, d / "residual.png")
     plt.close(fig)
     figs.append(("residual.png", "Residual vs time, input and input rate"))
-    # Spectra.
+    # Spectra: Welch amplitude spectral density (averaged, readable on long records).
+    from scipy.signal import welch
     n = y.size
-    f = np.fft.rfftfreq(n, dt)
-    win = np.hanning(n)
-    amp = lambda x: 2.0 * np.abs(np.fft.rfft((x - x.mean()) * win)) / max(win.sum(), 1e-300)  # noqa: E731
+    nper = int(min(n, max(256, n // 8)))
+    f, Py = welch(y - y.mean(), st.fs, nperseg=nper)
+    _, Pe = welch(e - e.mean(), st.fs, nperseg=nper)
     fig, ax = plt.subplots(figsize=(10, 4.5))
-    ax.semilogy(f[1:], k * amp(y)[1:] + 1e-30, lw=0.7, label="measured")
-    ax.semilogy(f[1:], k * amp(e)[1:] + 1e-30, lw=0.7, label="residual", color="C3")
-    if f.size > 2 and f[1] > 0:
-        ax.set_xscale("log")
+    ax.loglog(f[1:], k * np.sqrt(Py[1:]) + 1e-30, lw=0.8, label="measured")
+    ax.loglog(f[1:], k * np.sqrt(Pe[1:]) + 1e-30, lw=0.8, label="residual", color="C3")
     ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel(f"amplitude ({unit})")
-    ax.set_title("Amplitude spectra (Hann window)")
+    ax.set_ylabel(f"amplitude density ({unit}/√Hz)")
+    ax.set_title("Amplitude spectral density (Welch)")
     ax.legend()
     fig.tight_layout()
     _save(fig, d / "spectrum.png")
     plt.close(fig)
-    figs.append(("spectrum.png", "Amplitude spectrum of the measured output and the residual"))
+    figs.append(("spectrum.png", "Amplitude spectral density of the measured output and the residual"))
     # Correlations with bounds.
     cors = [st.auto, st.cross, *st.higher.values()]
     fig, axs = plt.subplots(2, 3, figsize=(12, 6))
@@ -226,7 +320,6 @@ def write_report(dir: str | os.PathLike, record, model_output: np.ndarray, stats
                  ladder: Sequence[Mapping[str, Any]] | None = None, diagnosis: Mapping[str, Any] | None = None,
                  *, force: bool = False, title: str | None = None) -> Path:
     """Write ``index.html`` and the PNG plots into ``dir`` (see the module docstring); return ``dir``."""
-    from ..cli.compare import findings  # the same plain-language findings as the terminal summary
     t = np.asarray(record.t, float)
     u = np.asarray(record.u, float)
     y = np.asarray(record.y, float)

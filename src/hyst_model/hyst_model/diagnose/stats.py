@@ -42,7 +42,7 @@ from scipy import stats as _sps
 __all__ = [
     "Fit", "Segment", "SegmentFit", "Band", "Correlation", "CompareStats",
     "fit_figures", "noise_sigma", "segment_input", "fit_by_segment", "fit_by_branch", "fit_by_level",
-    "fit_by_band", "loop_orientation", "harmonics", "ringing", "autocorr", "crosscorr", "higher_order_tests", "auto_lag_step", "compare_stats",
+    "fit_by_band", "loop_orientation", "harmonics", "ringing", "spectral_peaks", "autocorr", "crosscorr", "higher_order_tests", "auto_lag_step", "compare_stats",
     "z_value",
 ]
 
@@ -133,7 +133,8 @@ class Segment:
     ----------
     kind : str
         ``"hold"`` (input constant), ``"step"`` (a jump between holds, its first samples), ``"sine"`` (periodic
-        motion at ``freq``), or ``"motion"`` (anything else: ramps, transients, broadband input).
+        motion at ``freq``), ``"broadband"`` (the whole record when it is a multisine/noise/fast sweep), or
+        ``"motion"`` (anything else: ramps, transients).
     start, stop : int
         Sample range ``[start, stop)``.
     freq : float
@@ -183,8 +184,9 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 def _hold_mask(u: np.ndarray, fs: float, min_hold_s: float, tol: float | None) -> np.ndarray:
     span = float(np.ptp(u)) if u.size else 0.0
     if tol is None:
-        # Quantisation and noise make |du| of a held input non-zero; 6 σ of the difference noise is safe.
-        tol = max(6.0 * np.sqrt(2.0) * noise_sigma(u), 1e-9 * max(span, 1e-300))
+        # Quantisation and noise make |du| of a held input non-zero; 6 σ of the difference noise is safe. The
+        # cap keeps a broadband input (content up to Nyquist looks like "noise" to noise_sigma) from being a hold.
+        tol = max(min(6.0 * np.sqrt(2.0) * noise_sigma(u), 0.005 * span), 1e-9 * max(span, 1e-300))
     du = np.abs(np.diff(u, prepend=u[:1]))
     still = du <= tol
     still[0] = still[1] if u.size > 1 else True
@@ -196,18 +198,33 @@ def _hold_mask(u: np.ndarray, fs: float, min_hold_s: float, tol: float | None) -
     return hold
 
 
+def _schmitt_crossings(x: np.ndarray, h: float) -> np.ndarray:
+    """Indices where ``x`` passes +h after having been below −h, or −h after having been above +h."""
+    up = x > h
+    down = x < -h
+    idx = np.flatnonzero(up | down)
+    if idx.size == 0:
+        return idx
+    state = up[idx]
+    flips = np.flatnonzero(state[1:] != state[:-1]) + 1
+    out = idx[flips]
+    return out[out > 0]
+
+
 def _split_by_period(u: np.ndarray, a: int, b: int, fs: float, tol: float) -> list[Segment]:
     """Split a moving stretch ``[a, b)`` into sine segments of near-constant period (midline crossings)."""
     x = u[a:b]
     mid = 0.5 * (np.max(x) + np.min(x))
-    s = np.signbit(x - mid)
-    cross = np.flatnonzero(s[1:] != s[:-1]) + 1  # sample index (relative) after each crossing
+    # Schmitt trigger around the midline: input noise must not make extra crossings.
+    h = max(3.0 * noise_sigma(x), 0.01 * float(np.ptp(x)))
+    cross = _schmitt_crossings(x - mid, h)  # sample index (relative) at or after each crossing
     if cross.size < 4:  # fewer than 1.5 cycles: no frequency to speak of
         return [Segment("motion", a, b, level=float(np.mean(x)))]
-    # Sub-sample crossing times (linear interpolation) for the frequency estimate.
-    xa, xb = x[cross - 1] - mid, x[cross] - mid
+    # Sub-sample crossing times (linear interpolation through the threshold) for the frequency estimate.
+    sign = np.where(x[cross] - mid > 0, 1.0, -1.0)
+    xa, xb = x[cross - 1] - mid - sign * h, x[cross] - mid - sign * h
     frac = np.where(xb != xa, xa / (xa - xb), 0.5)
-    half = np.diff(cross - 1 + frac)
+    half = np.diff(cross - 1 + np.clip(frac, 0.0, 1.0))
     # Group consecutive half-periods whose length stays within tol of the running group median.
     groups: list[list[int]] = [[0]]
     for i in range(1, half.size):
@@ -239,7 +256,7 @@ def _split_by_period(u: np.ndarray, a: int, b: int, fs: float, tol: float) -> li
 
 
 def segment_input(t: np.ndarray, u: np.ndarray, *, min_hold_s: float = 0.05, step_s: float | None = None,
-                  tol: float | None = None, period_tol: float = 0.2) -> list[Segment]:
+                  tol: float | None = None, period_tol: float = 0.2, max_segments: int = 40) -> list[Segment]:
     """Cut an input record into holds, steps, sines (by frequency) and other motion.
 
     Parameters
@@ -255,6 +272,8 @@ def segment_input(t: np.ndarray, u: np.ndarray, *, min_hold_s: float = 0.05, ste
         Largest per-sample input change that still counts as constant (V); default from the input's noise.
     period_tol : float
         Relative change of half-period that starts a new sine segment (a frequency change).
+    max_segments : int
+        More segments than this, mostly shorter than 0.5 s, means a broadband input: one ``"broadband"`` segment.
 
     Returns
     -------
@@ -303,6 +322,9 @@ def segment_input(t: np.ndarray, u: np.ndarray, *, min_hold_s: float = 0.05, ste
             p = merged.pop()
             s = Segment(s.kind, p.start, s.stop, level=float(np.mean(u[p.start:s.stop])))
         merged.append(s)
+    if len(merged) > max_segments and np.median([s.stop - s.start for s in merged]) * dt < 0.5:
+        # Broadband input (multisine, noise, fast sweep): pieces of a few samples say nothing; one segment.
+        return [Segment("broadband", 0, n, level=float(np.mean(u)))]
     return merged
 
 
@@ -322,7 +344,8 @@ def fit_by_branch(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, tol: float | N
     """
     u = _as_1d("u", u)
     if tol is None:
-        tol = max(6.0 * np.sqrt(2.0) * noise_sigma(u), 1e-12 * float(np.ptp(u)) if u.size else 0.0)
+        span = float(np.ptp(u)) if u.size else 0.0
+        tol = max(min(6.0 * np.sqrt(2.0) * noise_sigma(u), 0.005 * span), 1e-12 * span)
     du = np.diff(u, prepend=u[:1])
     if du.size > 1:
         du[0] = du[1]  # the first sample has no predecessor: give it its neighbour's direction
@@ -450,6 +473,43 @@ def ringing(t: np.ndarray, e: np.ndarray, noise: float, window_s: float = 0.05) 
     if spec[i] < 5.0 * float(np.median(spec[1:])):
         return None
     return float(f[i]), rms
+
+
+def spectral_peaks(x: np.ndarray, fs: float, min_ratio: float = 4.0, max_peaks: int = 3,
+                   exclude: tuple[float, ...] = ()) -> list[tuple[float, float]]:
+    """Peaks of a signal's Welch power spectrum above its local level: ``[(frequency Hz, ratio), ...]``.
+
+    The local level is the median power within ±half an octave (on a log-frequency grid), so broad trends
+    (1/f, a low-pass roll-off) are not peaks while a resonance or a vibration line is, even a broad one. The
+    ratio is averaged over 5 bins so single noisy bins do not count. Frequencies in ``exclude`` (e.g. harmonics
+    of a sine drive, ±2 bins) and the lowest 4 bins are ignored. Strongest first.
+    """
+    from scipy.signal import find_peaks, welch
+    x = _as_1d("x", x)
+    n = x.size
+    if n < 256:
+        return []
+    nper = int(min(n, max(256, n // 8)))
+    f, P = welch(x - x.mean(), fs, nperseg=nper)
+    if f.size < 16 or not np.any(P > 0):
+        return []
+    lf = np.log10(f[4:])
+    lp = np.log10(np.maximum(P[4:], 1e-300))
+    grid = np.linspace(lf[0], lf[-1], 400)
+    lg = np.interp(grid, lf, lp)
+    half = max(1, int(round(np.log10(2 ** 0.5) / (grid[1] - grid[0]))))
+    base_g = np.array([np.median(lg[max(0, i - half):i + half + 1]) for i in range(grid.size)])
+    ratio = 10 ** (lp - np.interp(lf, grid, base_g))
+    ratio = np.convolve(ratio, np.ones(5) / 5, mode="same")
+    idx, _ = find_peaks(ratio, height=min_ratio, distance=5)
+    fp = f[4:]
+    df = f[1] - f[0]
+    cand = sorted((i for i in idx if not any(abs(fp[i] - e) <= 2 * df for e in exclude)), key=lambda i: -ratio[i])
+    keep: list[int] = []
+    for i in cand:  # one resonance gives several local maxima: keep the strongest within ±10 %
+        if all(abs(fp[i] - fp[j]) > 0.1 * fp[j] for j in keep):
+            keep.append(i)
+    return [(float(fp[i]), float(ratio[i])) for i in keep[:max_peaks]]
 
 
 # ------------------------------------------------------------------------------------------------ correlation
@@ -706,7 +766,13 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
         auto=autocorr(e, max_lag, step, conf, dt), cross=crosscorr(e, u, max_lag, step, conf, dt),
         higher=higher_order_tests(e, u, max_lag, step, conf, dt), lag_step=step,
         extra={"loop_orientation": loop_orientation(u, y), "harmonics": _harmonic_summary(t, u, e),
-               "ringing": _ringing_summary(t, u, e, noise_sigma(y))})
+               "ringing": _ringing_summary(t, u, e, noise_sigma(y)), "peaks": _peak_summary(t, u, e, fs)})
+
+
+def _peak_summary(t: np.ndarray, u: np.ndarray, e: np.ndarray, fs: float) -> list[dict[str, float]]:
+    drives = [s.freq for s in segment_input(t, u) if s.kind == "sine"]
+    exclude = tuple(k * f for f in drives for k in range(1, 41))
+    return [{"freq": f, "ratio": r} for f, r in spectral_peaks(e, fs, exclude=exclude)]
 
 
 def _harmonic_summary(t: np.ndarray, u: np.ndarray, e: np.ndarray) -> dict[str, Any] | None:

@@ -358,11 +358,45 @@ class DynamicsEffect(Effect):
             if zc >= 4 and amp0 > 3 * amp1 > 0:
                 ring_score = max(ring_score, 0.8)
                 ring_txt = f"; the residual rings and decays after steps ({zc} zero crossings in {m * dt * 1e3:.3g} ms)"
-        score = float(np.clip(max(2.0 * gain, ring_score), 0.0, 1.0))
+        coh_score, coh_txt = _coherence_test(u, rc, dt)
+        score = float(np.clip(max(2.0 * gain, ring_score, coh_score), 0.0, 1.0))
+        if coh_score >= max(2.0 * gain, ring_score) and coh_txt:
+            return score, coh_txt + ring_txt
         lag = corr(rc[1:], ud[:-1])
         return score, (f"the residual follows the input's acceleration: it explains {100 * gain:.0f} % of the "
                        f"residual variance beyond the input velocity (velocity alone {100 * r2v:.0f} %, "
                        f"corr {lag:+.2f}) → inertia/resonance of the stage{ring_txt}")
+
+
+def _coherence_test(u: np.ndarray, r: np.ndarray, dt: float) -> tuple[float, str]:
+    """For broadband inputs (multisines, noise, sweeps): is the residual a *linear, resonant* response to u?
+
+    Welch coherence between input and residual, weighted by the input's power over the excited band: near 1
+    when the residual is a linear filter of the input (missing dynamics), near 0 for noise or for nonlinear
+    loop-shape errors. A peak of the residual's gain |P_ur/P_uu| inside the band marks a resonance.
+    """
+    from scipy.signal import coherence, csd, welch
+    n = u.size
+    nper = int(min(1024, max(64, n // 8)))
+    if n < 4 * nper:
+        return 0.0, ""
+    fs = 1.0 / dt
+    f, C = coherence(u, r, fs, nperseg=nper)
+    _, Puu = welch(u, fs, nperseg=nper)
+    _, Pur = csd(u, r, fs, nperseg=nper)
+    band = Puu > 0.01 * Puu.max()
+    if band.sum() < 8:  # a sine or a few lines: coherence says nothing about dynamics there
+        return 0.0, ""
+    coh = float(np.average(C[band], weights=Puu[band]))
+    H = np.abs(Pur[band] / Puu[band])
+    fb = f[band]
+    i = int(np.argmax(H))
+    peaked = 0 < i < H.size - 1 and H[i] > 3.0 * float(np.median(H))
+    score = coh * (1.0 if peaked else 0.6)
+    txt = (f"the residual is a linear response to the input (coherence {coh:.2f} over {fb[0]:.3g}–{fb[-1]:.3g} Hz)"
+           + (f" whose gain peaks at {fb[i]:.3g} Hz ({H[i] / np.median(H):.0f}× its median) → a resonance of the "
+              "stage the model lacks" if peaked else " → linear dynamics the model lacks"))
+    return float(score), txt
 
 
 # ------------------------------------------------------------------------------------- choosing the structure

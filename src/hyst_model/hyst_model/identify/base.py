@@ -41,6 +41,7 @@ class TrainProblem:
         lo, hi = model.bounds
         self.lower, self.upper = lo.astype(np.float64), hi.astype(np.float64)
         self.has_jac = hasattr(model, "simulate_jac")
+        self.has_normal = hasattr(model, "normal_equations")
 
     def simulate(self, theta: np.ndarray) -> np.ndarray:
         self.n_eval += 1
@@ -52,6 +53,18 @@ class TrainProblem:
         if not np.all(np.isfinite(r)):
             return np.full(self.y.size, 1e3)
         return r
+
+    def for_model(self, model: Model) -> "TrainProblem":
+        """The same record and windows for another model (e.g. the base of a composed model)."""
+        p = TrainProblem.__new__(TrainProblem)
+        p.__dict__.update(self.__dict__)
+        p.model = model
+        p.n_eval = 0
+        lo, hi = model.bounds
+        p.lower, p.upper = lo.astype(np.float64), hi.astype(np.float64)
+        p.has_jac = hasattr(model, "simulate_jac")
+        p.has_normal = hasattr(model, "normal_equations")
+        return p
 
     def jac(self, theta: np.ndarray) -> np.ndarray:
         self.n_eval += 1
@@ -71,6 +84,32 @@ class TrainProblem:
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
             return np.full(self.y.size, np.inf), np.zeros((self.y.size, theta.size))
         return r, J[self.a:] / self.scale
+
+    def fd_residuals_jac(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residuals and a forward-difference Jacobian (p + 1 simulations), stepping inward at bounds."""
+        theta = np.asarray(theta, dtype=np.float64)
+        r0 = self.residuals(theta)
+        J = np.empty((r0.size, theta.size))
+        span = self.upper - self.lower
+        for i in range(theta.size):
+            h = 1e-6 * max(abs(theta[i]), 1e-3 * span[i] if np.isfinite(span[i]) else 1e-3, 1e-12)
+            if theta[i] + h > self.upper[i]:
+                h = -h
+            tp = theta.copy()
+            tp[i] += h
+            J[:, i] = (self.residuals(tp) - r0) / h
+        return r0, J
+
+    def normal_equations(self, theta: np.ndarray):
+        """``(JᵀJ, Jᵀr, rᵀr)`` of the normalised residuals: fused (MBW) or from :meth:`residuals_jac`."""
+        if self.has_normal:
+            self.n_eval += 1
+            with np.errstate(all="ignore"):
+                return self.model.normal_equations(np.asarray(theta, dtype=np.float64), self.t, self.u, self.a,
+                                                   self.y, self.scale)
+        from .lm import normal_from_jac
+        fun = self.residuals_jac if self.has_jac else self.fd_residuals_jac
+        return normal_from_jac(fun)(np.asarray(theta, dtype=np.float64))
 
     def cost(self, theta: np.ndarray) -> float:
         """Training RMSE (m), inf for a diverging parameter set."""
@@ -124,6 +163,8 @@ class Estimator:
         if not (np.all(np.isfinite(u)) and np.all(np.isfinite(y)) and np.all(np.isfinite(t))):
             raise FitError("data contain NaN/inf; check the record first")
         split = make_split(t, self.split)
+        if np.ptp(u[:split.train_stop]) == 0:
+            raise FitError("the input does not vary up to the end of the training window: nothing to identify")
         t0 = time.perf_counter()
         problem = TrainProblem(self.model, t, u, y, split)
         theta, n_iter, history, message = self._solve(problem)

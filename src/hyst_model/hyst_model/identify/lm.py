@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-__all__ = ["LMResult", "bounded_lm"]
+__all__ = ["LMResult", "bounded_lm", "normal_from_jac"]
 
 
 @dataclass
@@ -48,30 +48,40 @@ def _normal_equations(J: np.ndarray, r: np.ndarray):
     return H, g, rr
 
 
-def bounded_lm(fun_jac: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], x0: np.ndarray, lower: np.ndarray,
-               upper: np.ndarray, *, max_iter: int = 100, ftol: float = 1e-10, xtol: float = 1e-10,
-               lam0: float = 1e-3) -> LMResult:
+def normal_from_jac(fun_jac: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]):
+    """Adapt ``x -> (r, J)`` to ``x -> (JᵀJ, Jᵀr, rᵀr)`` for :func:`bounded_lm`."""
+    def fun_normal(x):
+        r, J = fun_jac(x)
+        if not np.all(np.isfinite(r)):
+            p = x.size
+            return np.zeros((p, p)), np.zeros(p), np.inf
+        return _normal_equations(np.ascontiguousarray(J), np.ascontiguousarray(r))
+    return fun_normal
+
+
+def bounded_lm(fun_normal: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, float]], x0: np.ndarray,
+               lower: np.ndarray, upper: np.ndarray, *, max_iter: int = 100, ftol: float = 1e-10,
+               xtol: float = 1e-10, lam0: float = 1e-3) -> LMResult:
     """Minimise ½‖r(x)‖² within ``[lower, upper]``.
 
     Parameters
     ----------
-    fun_jac : callable
-        ``x -> (r, J)``: residuals (n,) and Jacobian (n, p); non-finite residuals mean "reject this point".
+    fun_normal : callable
+        ``x -> (H, g, rr)`` with H = JᵀJ, g = Jᵀr, rr = rᵀr (inf rejects the point); see :func:`normal_from_jac`.
     x0 : ndarray
         Start (clipped into the bounds).
     max_iter : int
-        Budget of accepted-or-rejected trial points.
+        Budget of trial points (each one evaluation of ``fun_normal``).
     ftol, xtol : float
         Stop when the relative cost decrease or the step (relative to the bound span) falls below these.
     """
     lower = np.asarray(lower, dtype=np.float64)
     upper = np.asarray(upper, dtype=np.float64)
     x = np.clip(np.asarray(x0, dtype=np.float64), lower, upper)
-    r, J = fun_jac(x)
+    H, g, rr = fun_normal(x)
     nfev = 1
-    if not np.all(np.isfinite(r)):
+    if not np.isfinite(rr):
         return LMResult(x, np.inf, nfev, 0, -1, "start is not finite")
-    H, g, rr = _normal_equations(np.ascontiguousarray(J), r)
     cost = 0.5 * rr
     lam = lam0
     span = np.maximum(upper - lower, 1e-300)
@@ -95,20 +105,16 @@ def bounded_lm(fun_jac: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], x
         step = np.zeros_like(x)
         step[free] = step_f
         x_new = np.clip(x + step, lower, upper)
-        r_new, J_new = fun_jac(x_new)
+        H_new, g_new, rr_new = fun_normal(x_new)
         nfev += 1
-        if np.all(np.isfinite(r_new)):
-            H_new, g_new, rr = _normal_equations(np.ascontiguousarray(J_new), r_new)
-            c_new = 0.5 * rr
-        else:
-            c_new = np.inf
+        c_new = 0.5 * rr_new if np.isfinite(rr_new) else np.inf
         if c_new < cost:
             dc = cost - c_new
             dx = np.max(np.abs(x_new - x) / span)
             x, cost, H, g = x_new, c_new, H_new, g_new
             lam = max(lam / 3.0, 1e-15)
             if dc <= ftol * cost or dx <= xtol:
-                status, message = 1, "converged (relative cost change and step below tolerance)"
+                status, message = 1, "converged (relative cost change or step below tolerance)"
                 break
         else:
             lam *= 4.0

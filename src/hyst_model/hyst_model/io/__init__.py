@@ -28,7 +28,8 @@ def is_bag(path: str | Path) -> bool:
     return p.suffix == ".mcap"
 
 
-def load_record(path: str | Path, *, topic: str = STATE_TOPIC, columns=None, units=None) -> Record:
+def load_record(path: str | Path, *, topic: str = STATE_TOPIC, columns=None, units=None,
+                salvage: bool = False) -> Record:
     """Read a bag or a CSV file into a :class:`Record` (not yet checked: call :meth:`Record.check`)."""
     from ..errors import DataError
     p = Path(path)
@@ -37,5 +38,5 @@ def load_record(path: str | Path, *, topic: str = STATE_TOPIC, columns=None, uni
     if is_bag(p):
         if columns is not None or units is not None:
             raise DataError(f"{p}: --columns/--units apply to CSV files, not bags (bags are SI by contract)")
-        return read_state_bag(p, topic)
+        return read_state_bag(p, topic, salvage=salvage)
     return read_csv(p, columns, units)

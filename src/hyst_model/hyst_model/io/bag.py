@@ -24,7 +24,8 @@ import numpy as np
 from ..errors import DataError
 from .record import Record
 
-__all__ = ["JointStates", "STATE_TOPIC", "list_topics", "read_joint_states", "read_state_bag", "write_state_bag"]
+__all__ = ["JointStates", "STATE_TOPIC", "list_topics", "read_joint_states", "read_state_bag", "salvage_joint_states",
+           "write_state_bag"]
 
 #: Default topic of the stage state stream (contract).
 STATE_TOPIC = "/stage/state"
@@ -145,14 +146,66 @@ def read_joint_states(path: str | Path, topic: str = STATE_TOPIC) -> JointStates
                        _pad(pos, k), _pad(vel, k), _pad(eff, k))
 
 
-def read_state_bag(path: str | Path, topic: str = STATE_TOPIC) -> Record:
+def salvage_joint_states(path: str | Path, topic: str = STATE_TOPIC) -> JointStates:
+    """Read what a killed recorder left in an MCAP file without summary/footer (opt-in ``--salvage``).
+
+    The file is read front to back with the ``mcap`` stream reader; every message of complete chunks on ``topic``
+    is kept, reading stops at the first damaged record. ``path`` may be the ``.mcap`` file or a bag directory
+    holding exactly one.
+    """
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+    p = Path(path)
+    if p.is_dir():
+        files = sorted(p.glob("*.mcap"))
+        if len(files) != 1:
+            raise DataError(f"{p}: salvage needs exactly one .mcap file in the bag, found {len(files)}")
+        p = files[0]
+    if not p.is_file():
+        raise DataError(f"{path}: no such bag")
+    ts = _typestore()
+    chans: dict[int, str] = {}
+    stamps, logs, names, pos, vel, eff = [], [], [], [], [], []
+    with open(p, "rb") as fh:
+        try:
+            for rec in StreamReader(fh, skip_magic=False).records:
+                if isinstance(rec, Channel):
+                    chans[rec.id] = rec.topic
+                elif isinstance(rec, Message) and chans.get(rec.channel_id) == topic:
+                    msg = ts.deserialize_cdr(rec.data, _JS)
+                    stamps.append(int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec))
+                    logs.append(int(rec.log_time))
+                    names.append(list(msg.name))
+                    pos.append(np.asarray(msg.position, dtype=np.float64))
+                    vel.append(np.asarray(msg.velocity, dtype=np.float64))
+                    eff.append(np.asarray(msg.effort, dtype=np.float64))
+        except Exception:  # the damaged tail: keep everything before it  # noqa: S110
+            pass
+    if not stamps:
+        raise DataError(f"{path}: nothing on {topic!r} could be salvaged")
+    k = max((len(r) for r in pos + vel + eff), default=0)
+    return JointStates(np.array(stamps, dtype=np.int64), np.array(logs, dtype=np.int64), names,
+                       _pad(pos, k), _pad(vel, k), _pad(eff, k))
+
+
+def read_state_bag(path: str | Path, topic: str = STATE_TOPIC, *, salvage: bool = False) -> Record:
     """The stage state record (t in s from the first sample, u in V, y in m) from a bag.
+
+    With ``salvage=True`` an MCAP bag that cannot be opened (a recorder killed before writing its footer) is read
+    up to its damaged tail instead of failing; ``meta['salvaged']`` is then True.
 
     ``t`` comes from ``header.stamp`` (the sample time); if no message has its stamp set, the bag log time is
     used instead and ``meta['time_source']`` says so. Messages are ordered by time. Messages without
     ``position[0]``/``effort[0]`` become NaN rows, which :meth:`Record.check` reports.
     """
-    js = read_joint_states(path, topic)
+    salvaged = False
+    try:
+        js = read_joint_states(path, topic)
+    except DataError as err:
+        if not (salvage and "cannot open bag" in str(err)):
+            raise
+        js = salvage_joint_states(path, topic)
+        salvaged = True
     if js.position.shape[1] == 0 or np.isnan(js.position[:, 0]).all():
         raise DataError(f"{path}: {topic!r} messages carry no position[0] (displacement, m)")
     if js.effort.shape[1] == 0 or np.isnan(js.effort[:, 0]).all():
@@ -166,7 +219,8 @@ def read_state_bag(path: str | Path, topic: str = STATE_TOPIC) -> Record:
     t0 = int(ns[0])
     t = (ns - t0).astype(np.float64) * 1e-9
     meta = {"source": str(path), "topic": topic, "t0_ns": t0, "time_source": source, "format": "rosbag2",
-            "missing_values": int(np.isnan(js.position[:, 0]).sum() + np.isnan(js.effort[:, 0]).sum())}
+            "missing_values": int(np.isnan(js.position[:, 0]).sum() + np.isnan(js.effort[:, 0]).sum()),
+            "salvaged": salvaged}
     return Record(t, js.effort[order, 0], js.position[order, 0], meta)
 
 

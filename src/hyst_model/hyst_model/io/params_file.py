@@ -6,7 +6,7 @@
       ros__parameters:
         model:
           base: mbw
-          effects: []
+          effects: [creep]     # omitted when there are none: ROS cannot type an empty list
           zeta1: 0.4029        # every Param.name; effect params nested: creep.gain -> creep: {gain: ...}
           ...
           offset: 0.0          # m
@@ -128,7 +128,9 @@ def _plain(v):
 
 def to_yaml(spec: ParamsSpec, node: str = "/**") -> str:
     """The YAML text of a params file. Numbers in ``values``/``config`` are written as floats (ROS types them)."""
-    model: dict = {"base": spec.base, "effects": list(spec.effects)}
+    model: dict = {"base": spec.base}
+    if spec.effects:  # an empty list has no ROS type (rcl reads it as NOT_SET, which nodes cannot declare)
+        model["effects"] = list(spec.effects)
     model.update(nest({k: (float(v) if isinstance(v, (int, float, np.number)) and not isinstance(v, bool) else
                            _plain(v)) for k, v in {**spec.config, **spec.values}.items()}))
     doc = {node: {"ros__parameters": {"model": model}}}

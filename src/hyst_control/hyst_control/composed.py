@@ -1,0 +1,119 @@
+"""hyst_loop_node: simulated stage, controller and reference node in one process, for 2 kHz loops.
+
+Across processes every sample costs two DDS hops; in one process with
+:class:`rclpy.experimental.EventsExecutor` (fallback: SingleThreadedExecutor) the loop keeps up at 2 kHz.
+The executor is driven with ``spin_once`` so SIGINT/SIGTERM end it (``EventsExecutor.spin()`` ignores them).
+
+Usage::
+
+    hyst_loop_node [--seconds S] [--schedule dppc:3,dmrac:3,pid:3] [--summary-json] [--wait-subscribers N]
+                   --ros-args -p rate:=2000.0 -p shape:=sine -p frequency:=10.0
+
+``--ros-args`` parameters reach all three nodes (``rate`` sets the sim, controller and reference rate alike);
+``-p hyst_controller:algorithm:=dmrac`` targets one node. ``--schedule`` switches the controller's ``algorithm``
+parameter at the given times (seconds per entry) through its own parameter callbacks, bumplessly;
+``--summary-json`` prints the per-algorithm tracking summary (RMSE/MAE in m) and loop counters as one JSON line at
+exit.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.utilities import remove_ros_args
+
+from .controller_node import ControllerNode
+from .errors import ControlError
+from .loop import parse_schedule
+from .reference_node import ReferenceNode
+
+__all__ = ["main"]
+
+
+def _executor():
+    try:
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    except ImportError:  # pragma: no cover - older rclpy
+        return SingleThreadedExecutor()
+
+
+def main(args=None) -> int:
+    """Console script ``hyst_loop_node``."""
+    argv = remove_ros_args(args=sys.argv if args is None else args)[1:]
+    ap = argparse.ArgumentParser(prog="hyst_loop_node", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=float, default=None, help="stop after this many seconds")
+    ap.add_argument("--schedule", default="", help="ALG:SECONDS,... switch algorithm on a timetable")
+    ap.add_argument("--summary-json", action="store_true", help="print the tracking summary as JSON at exit")
+    ap.add_argument("--wait-subscribers", type=int, default=0, metavar="N",
+                    help="start only once /stage/state and /stage/command each have N subscribers (e.g. 2 = "
+                         "the loop's own plus a recorder's), at most 30 s")
+    opts = ap.parse_args(argv)
+    try:
+        schedule = parse_schedule(opts.schedule)
+    except ControlError as err:
+        print(f"hyst_loop_node: {err}", file=sys.stderr)
+        return 2
+    from hyst_sim.sim_node import SimNode  # noqa: PLC0415 - the sim is a sibling package
+
+    rclpy.init(args=args)
+    nodes = []
+    ctl = None
+    t_start = None
+    try:
+        sim = SimNode()
+        ctl = ControllerNode()
+        ref = ReferenceNode()
+        nodes = [sim, ctl, ref]
+        if opts.wait_subscribers > 0:  # e.g. a bag recorder: nothing runs (no timers) until it listens
+            until = time.monotonic() + 30.0
+            while time.monotonic() < until and rclpy.ok() and not (
+                    ctl.count_subscribers("/stage/state") >= opts.wait_subscribers
+                    and ctl.count_subscribers("/stage/command") >= opts.wait_subscribers):
+                time.sleep(0.05)
+        ex = _executor()
+        for n in nodes:
+            ex.add_node(n)
+        t_start = time.monotonic()
+        stops = []
+        acc = 0.0
+        for alg, dur in schedule:
+            stops.append((acc, alg))
+            acc += dur
+        end = opts.seconds if opts.seconds is not None else (acc if schedule else None)
+        idx = 0
+        while rclpy.ok():
+            now = time.monotonic() - t_start
+            if idx < len(stops) and now >= stops[idx][0]:
+                if ctl.get_parameter("algorithm").value != stops[idx][1]:
+                    res = ctl.set_parameters([Parameter("algorithm", value=stops[idx][1])])[0]
+                    if not res.successful:
+                        raise ControlError(res.reason)
+                idx += 1
+            if end is not None and now >= end:
+                break
+            ex.spin_once(timeout_sec=0.05)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ControlError, ValueError) as err:
+        print(f"hyst_loop_node: {err}", file=sys.stderr)
+        return 2
+    finally:
+        if opts.summary_json and ctl is not None:
+            elapsed = time.monotonic() - t_start if t_start else 0.0
+            sim_counts = dict(nodes[0].counts) if nodes else {}
+            print(json.dumps({"tracking": ctl.tracking_summary(), "controller": ctl.counts,
+                              "sim": sim_counts, "seconds": elapsed}), flush=True)
+        for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,126 @@
+"""Controller node in an isolated context: stamps echoed, parameters validated with reasons, params file and
+run-time model updates, watchdog."""
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from hyst_control.controller_node import ControllerNode  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture
+def harness(tmp_path):
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    made = []
+
+    def make(*cli):
+        node = ControllerNode(context=ctx, cli_args=["--ros-args", *cli] if cli else None)
+        peer = rclpy.create_node("peer", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(peer)
+        got = {"cmd": [], "diag": [], "cstate": []}
+        peer.create_subscription(JointState, "/stage/command", got["cmd"].append, 100)
+        peer.create_subscription(JointState, "/controller/state", got["cstate"].append, 100)
+        peer.create_subscription(DiagnosticArray, "/diagnostics", got["diag"].append, 100)
+        pub = peer.create_publisher(JointState, "/stage/state", 100)
+        made.extend([node, peer])
+        return node, peer, ex, pub, got
+
+    yield make
+    for n in made:
+        n.destroy_node()
+    rclpy.try_shutdown(context=ctx)
+
+
+def _state(k: int, y: float, u: float) -> JointState:
+    m = JointState()
+    m.header.stamp.sec, m.header.stamp.nanosec = 100 + k // 1000, (k % 1000) * 1_000_000
+    m.name, m.position, m.effort = ["stage"], [y], [u]
+    return m
+
+
+def _spin_until(ex, cond, timeout=10.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and not cond():
+        ex.spin_once(timeout_sec=0.01)
+    return cond()
+
+
+def test_commands_echo_the_state_stamp_and_publish_internal_state(harness):
+    node, peer, ex, pub, got = harness("-p", "state_decimation:=1", "-p", "reference:=constant:15",
+                                       "-p", "watchdog_periods:=100000")
+    assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
+    for k in range(20):
+        pub.publish(_state(k, 10e-6, 50.0))
+        assert _spin_until(ex, lambda: len(got["cmd"]) > k)
+    stamps = [(m.header.stamp.sec, m.header.stamp.nanosec) for m in got["cmd"]]
+    assert stamps == [(100, k * 1_000_000) for k in range(20)]
+    assert all(0.0 <= m.effort[0] <= 150.0 for m in got["cmd"])
+    assert got["cmd"][0].effort[0] > 50.0  # 5 µm below the reference: DPPC pushes up
+    names = got["cstate"][-1].name
+    assert {"error", "epsilon", "lambda", "nu"} <= set(names)
+
+
+@pytest.mark.parametrize(("name", "value", "why"), [
+    ("algorithm", "lqr", "algorithm must be one of"),
+    ("dppc.lambda_inf", 30e-6, "lambda0 > lambda_inf"),
+    ("dmrac.initial", "cs7", "dmrac.initial"),
+    ("model.delta1", 1.2, "delta1"),
+    ("v_min", 160.0, "v_min"),
+    ("model.dt", 0.0005, "set rate:=2000"),
+])
+def test_bad_parameters_are_rejected_with_a_reason(harness, name, value, why):
+    node, *_ = harness()
+    res = node.set_parameters([Parameter(name, value=value)])[0]
+    assert not res.successful and why in res.reason
+    assert node.get_parameter(name).value != value
+
+
+def test_out_of_range_gain_is_rejected_by_the_descriptor(harness):
+    node, *_ = harness()
+    res = node.set_parameters([Parameter("dppc.chi", value=1.5)])[0]
+    assert not res.successful
+
+
+def test_params_file_sets_the_model_and_model_updates_apply_at_run_time(harness, tmp_path):
+    p = tmp_path / "stage.yaml"
+    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      effects: []\n      zeta1: 0.45\n"
+                 "      y_scale: 5.0e-06\n      dt: 0.001\n    fit:\n      method: fast\n      rmse: 1.0e-08\n")
+    node, peer, ex, pub, got = harness("--params-file", str(p), "-p", "algorithm:=dmrac")
+    assert node.get_parameter("model.zeta1").value == pytest.approx(0.45)
+    assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
+    pub.publish(_state(0, 10e-6, 50.0))
+    assert _spin_until(ex, lambda: len(got["cmd"]) > 0)
+    assert node._ctrl.model.zeta1 == pytest.approx(0.45)  # noqa: SLF001
+    assert node.set_parameters([Parameter("model.delta2", value=0.95)])[0].successful
+    assert node._ctrl.model.delta2 == pytest.approx(0.95)  # noqa: SLF001
+
+
+def test_watchdog_commands_v_safe_and_reports_error(harness):
+    node, peer, ex, pub, got = harness("-p", "rate:=1000.0", "-p", "watchdog_periods:=20", "-p", "v_safe:=5.0")
+    assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
+    for k in range(5):
+        pub.publish(_state(k, 15e-6, 80.0))
+        _spin_until(ex, lambda: len(got["cmd"]) > k)
+    assert _spin_until(ex, lambda: any(m.effort[0] <= 5.0 + 1e-9 for m in got["cmd"]), timeout=5.0)
+    assert node.counts["watchdog_trips"] == 1
+    assert _spin_until(ex, lambda: any(s.level == DiagnosticStatus.ERROR for d in got["diag"] for s in d.status),
+                       timeout=5.0)
+    # states come back: the controller restarts from the applied voltage, no jump
+    n0 = len(got["cmd"])
+    pub.publish(_state(100, 15e-6, 5.0))
+    assert _spin_until(ex, lambda: len(got["cmd"]) > n0)
+    assert math.isfinite(got["cmd"][-1].effort[0])
+    assert not node._tripped  # noqa: SLF001

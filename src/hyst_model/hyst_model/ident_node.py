@@ -1,0 +1,345 @@
+"""``hyst_ident_node``: refit the stage model from recorded bags and hand it to the controller.
+
+Work is timer driven. At start the bags in ``bags`` are queued; every ``poll_period`` the folder ``watch_dir`` (if
+set) is scanned for new rosbag2 directories or ``.mcap`` files that have not changed for ``settle_time`` seconds
+(a recorder still writing is left alone). Each bag is fitted in a worker thread (the node keeps answering its
+parameter services), then
+
+* the params file ``params_file`` is written atomically (an existing file the node did not write itself is only
+  replaced with ``overwrite: true``),
+* a JSON summary is published on ``~/fit_result`` (``std_msgs/String``, transient local),
+* with ``controller_node`` set (e.g. ``/hyst_controller``) the ``model.*`` parameters are pushed to that node
+  through its parameter service (``AsyncParameterClient.set_parameters_atomically``: all or nothing).
+
+A bad bag is logged and skipped; the node carries on. Parameters are declared with descriptors and ranges,
+validated in the on-set callback and applied by swapping a frozen config.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterUninitializedException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from std_msgs.msg import String
+
+from .core.mbw import PARAM_NAMES
+from .errors import HystError
+
+__all__ = ["IdentConfig", "IdentNode", "main", "fit_bag", "controller_parameters"]
+
+_METHODS = ("fast", "epso", "lsq")
+
+
+@dataclass(frozen=True)
+class IdentConfig:
+    """Validated node settings (see the parameter descriptions in :meth:`IdentNode._declare`)."""
+
+    bags: tuple[str, ...] = ()
+    watch_dir: str = ""
+    poll_period: float = 2.0
+    settle_time: float = 2.0
+    topic: str = "/stage/state"
+    model: str = "mbw"
+    effects: tuple[str, ...] = ()
+    method: str = "fast"
+    seed: int = -1
+    val_fraction: float = 0.25
+    params_file: str = ""
+    overwrite: bool = False
+    controller_node: str = ""
+    push_timeout: float = 5.0
+
+    def validate(self) -> "IdentConfig":
+        from .models import BASE_MODELS
+        if self.model not in BASE_MODELS:
+            raise ValueError(f"model must be one of {', '.join(sorted(BASE_MODELS))}")
+        if self.method not in _METHODS:
+            raise ValueError(f"method must be one of {', '.join(_METHODS)}")
+        if self.watch_dir and not Path(self.watch_dir).is_dir():
+            raise ValueError(f"watch_dir {self.watch_dir!r} is not a directory")
+        if self.params_file and not Path(self.params_file).parent.is_dir():
+            raise ValueError(f"directory of params_file {self.params_file!r} does not exist")
+        if not self.topic.startswith("/"):
+            raise ValueError("topic must be absolute (start with /)")
+        if self.controller_node and not self.controller_node.startswith("/"):
+            raise ValueError("controller_node must be a fully qualified node name such as /hyst_controller")
+        return self
+
+
+def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
+    """Fit ``cfg.model`` (+ effects) to one bag; returns ``(summary, model, result, dt)``. Pure: no ROS."""
+    from .identify import fit
+    from .io import read_state_bag
+    from .models import data_config
+    from .spec import build_model
+    rec = read_state_bag(path, cfg.topic).check()
+    config = dict(data_config(rec.u, rec.y), dt=rec.dt)
+    model = build_model(cfg.model, cfg.effects, config)
+    res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed,
+              split=cfg.val_fraction if cfg.val_fraction > 0 else None)
+    summary = {"bag": str(path), "model": cfg.model, "effects": list(cfg.effects), "method": cfg.method,
+               "rmse": res.rmse, "rmse_train": res.rmse_train, "seconds": res.seconds, "samples": len(rec),
+               "params": res.params}
+    return summary, model, res, rec.dt
+
+
+def controller_parameters(model, theta) -> list[Parameter]:
+    """``model.*`` parameters the controller node declares (MBW only; BW is MBW with zero rate terms)."""
+    base = getattr(model, "base", model)
+    if getattr(model, "effects", None):
+        raise HystError("the controller takes a plain MBW/BW model, not base + effects")
+    if base.name not in ("mbw", "bw"):
+        raise HystError(f"the controller inverts MBW; a {base.name!r} model cannot be pushed")
+    values = dict(zip(PARAM_NAMES, (0.0,) * 8))
+    values.update(model.unpack(theta))
+    values.update({k: float(v) for k, v in model.config().items() if k in ("u_scale", "y_scale")})
+    out = [Parameter("model.base", Parameter.Type.STRING, "mbw")]
+    out += [Parameter(f"model.{k}", Parameter.Type.DOUBLE, float(values[k]))
+            for k in PARAM_NAMES + ("offset", "u_scale", "y_scale")]
+    return out
+
+
+def _fp(lo: float, hi: float) -> list[FloatingPointRange]:
+    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+
+
+class IdentNode(Node):
+    """Refits the stage model from bags; see the module docstring."""
+
+    def __init__(self, **kwargs):
+        super().__init__("hyst_ident_node", **kwargs)
+        self._declare()
+        try:
+            self._cfg = self._read().validate()
+        except ValueError as err:
+            raise HystError(f"invalid parameters: {err}") from err
+        self.add_on_set_parameters_callback(self._on_set)
+        self._queue: list[str] = list(self._cfg.bags)
+        self._seen: set[str] = set(os.path.abspath(b) for b in self._cfg.bags)
+        self._sizes: dict[str, tuple[int, float]] = {}
+        self._written_by_me: set[str] = set()
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hyst_fit")
+        self._job: Future | None = None
+        self._job_bag = ""
+        self._client: AsyncParameterClient | None = None
+        self._client_name = ""
+        self._pending: tuple | None = None  # (params, deadline_s, summary): waiting for the controller service
+        self.results: list[dict] = []
+        qos = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._pub = self.create_publisher(String, "~/fit_result", qos)
+        self._timer = self.create_timer(0.1, self._tick)
+        self._last_scan = -1e9
+        self.get_logger().info(f"ready: {len(self._queue)} bag(s) queued"
+                               + (f", watching {self._cfg.watch_dir}" if self._cfg.watch_dir else ""))
+
+    # parameters ------------------------------------------------------------------------------------------
+    def _declare(self) -> None:
+        d = self.declare_parameter
+        S = Parameter.Type.STRING_ARRAY
+        d("bags", S, ParameterDescriptor(description="bags (rosbag2 dirs or .mcap files) to fit at start"))
+        d("watch_dir", "", ParameterDescriptor(description="folder watched for new bags ('' = off)"))
+        d("poll_period", 2.0, ParameterDescriptor(description="folder scan period (s)",
+                                                  floating_point_range=_fp(0.05, 600)))
+        d("settle_time", 2.0, ParameterDescriptor(description="a bag is complete when unchanged this long (s)",
+                                                  floating_point_range=_fp(0.0, 3600)))
+        d("topic", "/stage/state", ParameterDescriptor(description="JointState topic with the stage state"))
+        d("model", "mbw", ParameterDescriptor(description="base model: mbw | bw | pi"))
+        d("effects", S, ParameterDescriptor(description="effects composed onto the base (hyst_model.effects)"))
+        d("method", "fast", ParameterDescriptor(description="identifier: fast | epso | lsq"))
+        d("seed", -1, ParameterDescriptor(description="random seed for epso (-1 = random)",
+                                          integer_range=[IntegerRange(from_value=-1, to_value=2**31 - 1, step=1)]))
+        d("val_fraction", 0.25, ParameterDescriptor(description="held-out tail of each bag for validation (0 = none)",
+                                                    floating_point_range=_fp(0.0, 0.9)))
+        d("params_file", "", ParameterDescriptor(description="params file to write after each fit ('' = none)"))
+        d("overwrite", False, ParameterDescriptor(
+            description="replace a params file that existed before this node wrote it"))
+        d("controller_node", "", ParameterDescriptor(
+            description="push model.* to this node after each fit, e.g. /hyst_controller ('' = off)"))
+        d("push_timeout", 5.0, ParameterDescriptor(description="wait this long for the controller's parameter "
+                                                               "service (s)", floating_point_range=_fp(0.1, 600)))
+
+    def _read(self, changes: dict | None = None) -> IdentConfig:
+        def get(name):
+            if changes and name in changes:
+                return changes[name]
+            try:
+                return self.get_parameter(name).value
+            except ParameterUninitializedException:  # typed string arrays start unset: empty
+                return None
+        return IdentConfig(
+            bags=tuple(get("bags") or ()), watch_dir=str(get("watch_dir")), poll_period=float(get("poll_period")),
+            settle_time=float(get("settle_time")), topic=str(get("topic")), model=str(get("model")),
+            effects=tuple(get("effects") or ()), method=str(get("method")), seed=int(get("seed")),
+            val_fraction=float(get("val_fraction")), params_file=str(get("params_file")),
+            overwrite=bool(get("overwrite")), controller_node=str(get("controller_node")),
+            push_timeout=float(get("push_timeout")))
+
+    def _on_set(self, params) -> SetParametersResult:
+        try:
+            cfg = self._read({p.name: p.value for p in params}).validate()
+        except (ValueError, TypeError) as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        new_bags = [b for b in cfg.bags if os.path.abspath(b) not in self._seen]
+        self._cfg = replace(cfg)
+        for b in new_bags:  # bags set at run time are queued too
+            self._seen.add(os.path.abspath(b))
+            self._queue.append(b)
+        return SetParametersResult(successful=True)
+
+    # work --------------------------------------------------------------------------------------------------
+    def _scan(self) -> None:
+        cfg = self._cfg
+        if not cfg.watch_dir:
+            return
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if now - self._last_scan < cfg.poll_period:
+            return
+        self._last_scan = now
+        try:
+            entries = sorted(Path(cfg.watch_dir).iterdir())
+        except OSError as err:
+            self.get_logger().warning(f"cannot scan {cfg.watch_dir}: {err}")
+            return
+        for p in entries:
+            key = str(p.resolve())
+            if key in self._seen or p.name.startswith("."):
+                continue
+            if not ((p.is_dir() and (p / "metadata.yaml").exists()) or p.suffix == ".mcap"):
+                continue
+            files = [p] if p.is_file() else [f for f in p.iterdir() if f.is_file()]
+            size = sum(f.stat().st_size for f in files)
+            mtime = max(f.stat().st_mtime for f in files)
+            if self._sizes.get(key, (None,))[0] != size or time.time() - mtime < cfg.settle_time:
+                self._sizes[key] = (size, mtime)
+                continue
+            self._seen.add(key)
+            self._queue.append(str(p))
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _tick(self) -> None:
+        self._scan()
+        self._try_push()
+        if self._job is not None:
+            if not self._job.done():
+                return
+            job, bag, self._job = self._job, self._job_bag, None
+            try:
+                summary, model, res, dt = job.result()
+            except HystError as err:
+                self.get_logger().error(f"{bag}: {err}")
+                self._publish({"bag": bag, "error": str(err)})
+                return
+            except Exception as err:  # a broken bag or model must not take the node down
+                self.get_logger().error(f"{bag}: fit failed ({type(err).__name__}: {err})")
+                self._publish({"bag": bag, "error": f"{type(err).__name__}: {err}"})
+                return
+            self._deliver(summary, model, res, dt)
+        if self._queue and self._job is None:
+            bag = self._queue.pop(0)
+            self._job_bag = bag
+            self.get_logger().info(f"fitting {bag}")
+            self._job = self._pool.submit(fit_bag, bag, self._cfg)
+
+    def _deliver(self, summary: dict, model, res, dt: float) -> None:
+        cfg = self._cfg
+        self.get_logger().info(f"{summary['bag']}: validation RMSE {res.rmse * 1e9:.2f} nm "
+                               f"(train {res.rmse_train * 1e9:.2f} nm, {res.seconds:.2f} s)")
+        if cfg.params_file:
+            from .io import spec_from_model, write_params
+            target = os.path.abspath(cfg.params_file)
+            force = cfg.overwrite or target in self._written_by_me
+            prov = {"method": cfg.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": summary["bag"]}
+            try:
+                write_params(target, spec_from_model(model, res.theta, fit=prov, dt=dt), force=force)
+                self._written_by_me.add(target)
+                summary["params_file"] = target
+            except HystError as err:
+                self.get_logger().error(f"not written: {err} (set overwrite:=true to replace it)")
+                summary["params_file_error"] = str(err)
+        if cfg.controller_node:
+            self._push(model, res.theta, summary)
+        self._publish(summary)
+
+    def _push(self, model, theta, summary: dict) -> None:
+        cfg = self._cfg
+        try:
+            params = controller_parameters(model, theta)
+        except HystError as err:
+            self.get_logger().warning(f"not pushed: {err}")
+            summary["push"] = f"skipped: {err}"
+            return
+        if self._client is None or self._client_name != cfg.controller_node:
+            self._client = AsyncParameterClient(self, cfg.controller_node)
+            self._client_name = cfg.controller_node
+        summary["push"] = "pending"
+        self._pending = (params, self._now() + cfg.push_timeout, summary["bag"])
+        self._try_push()
+
+    def _try_push(self) -> None:
+        """Send a pending push once the controller's parameter service is discovered (timer driven, no blocking)."""
+        if self._pending is None or self._client is None:
+            return
+        params, deadline, bag = self._pending
+        node_name = self._client_name
+        if not self._client.services_are_ready():
+            if self._now() > deadline:
+                self._pending = None
+                self.get_logger().warning(f"{node_name} parameter service not available; model not pushed")
+                self._publish({"bag": bag, "push": "controller not available"})
+            return
+        self._pending = None
+        fut = self._client.set_parameters_atomically(params)
+        summary = {"bag": bag}
+
+        def done(f):
+            try:
+                r = f.result().result
+                ok = r.successful
+                self.get_logger().info(f"pushed model to {node_name}" if ok else
+                                       f"{node_name} rejected the model: {r.reason}")
+                self._publish({"bag": summary["bag"], "push": "accepted" if ok else f"rejected: {r.reason}"})
+            except Exception as err:  # service went away mid-call
+                self.get_logger().error(f"push to {node_name} failed: {err}")
+        fut.add_done_callback(done)
+
+    def _publish(self, obj: dict) -> None:
+        self.results.append(obj)
+        self._pub.publish(String(data=json.dumps(obj, default=float)))
+
+    def destroy_node(self):
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        return super().destroy_node()
+
+
+def main(args=None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = IdentNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except HystError as err:
+        import sys
+        print(f"hyst_ident_node: error: {err}", file=sys.stderr)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
