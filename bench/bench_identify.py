@@ -16,7 +16,7 @@ import numpy as np
 
 EPSO_ITERATIONS = 1000
 EPSO_EARLY = 300  # also reported: the best RMSE EPSO had reached after this many generations
-PIEZO = Path("/work/shared/data/piezo_150V_1Hz/piezo_150V_1Hz.csv")
+PIEZO = Path(__file__).resolve().parents[2] / "shared" / "data" / "piezo_150V_1Hz" / "piezo_150V_1Hz.csv"
 
 
 def _record(n: int = 20000, seed: int = 0):

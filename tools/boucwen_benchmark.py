@@ -35,7 +35,7 @@ from scipy.optimize import least_squares
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "boucwen_benchmark"
 if not DATA.is_dir():  # running from a different checkout layout
-    DATA = Path("/work/shared/data/boucwen_benchmark")
+    DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "boucwen_benchmark"
 PERIOD = 8192
 FS = 750.0
 

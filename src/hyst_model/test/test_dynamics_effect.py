@@ -17,7 +17,7 @@ from hyst_model.io.params_file import read_params, spec_from_model, write_params
 from hyst_model.spec import build_model
 
 TRUTH = np.array([BENCHMARK_TRUTH[k] for k in ("fn", "zeta", "gain", "share", "bg", "bd")])
-BENCH = Path("/work/shared/data/boucwen_benchmark")
+BENCH = Path(__file__).resolve().parents[4] / "shared" / "data" / "boucwen_benchmark"
 ROOT = Path(__file__).resolve().parents[3]
 
 

@@ -10,7 +10,7 @@ from hyst_model.identify import fit
 from hyst_model.io import read_csv
 from hyst_model.models import BASE_MODELS, data_config
 
-DATA = Path("/work/shared/data/piezo_150V_1Hz/piezo_150V_1Hz.csv")
+DATA = Path(__file__).resolve().parents[4] / "shared" / "data" / "piezo_150V_1Hz" / "piezo_150V_1Hz.csv"
 
 
 @pytest.mark.slow

@@ -1,4 +1,5 @@
 """CSV IO: SI native format, column/unit options, and clear errors."""
+from pathlib import Path
 import numpy as np
 import pytest
 
@@ -28,7 +29,7 @@ def test_columns_and_units_convert_to_si(tmp_path):
 
 
 def test_real_piezo_header_reads_in_si():
-    rec = read_csv("/work/shared/data/piezo_150V_1Hz/piezo_150V_1Hz.csv",
+    rec = read_csv(Path(__file__).resolve().parents[4] / "shared" / "data" / "piezo_150V_1Hz" / "piezo_150V_1Hz.csv",
                    columns="t_s,voltage_V,displacement_um", units="s,V,um")
     assert len(rec) == 50001 and abs(rec.y[0] + 1.617e-6) < 1e-9 and rec.u.max() == 150.0
 
