@@ -325,6 +325,12 @@ class IdentNode(Node):
 
 
 def main(args=None) -> None:
+    import sys as _sys
+    argv = _sys.argv[1:] if args is None else list(args)
+    own = argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv  # ROS args are not ours
+    if "--help" in own or "-h" in own:
+        print('hyst_ident_node: refit the stage model from rosbag2 recordings (given bags or a watched folder), write the\nROS 2 params file and optionally push model.* to a running controller node.\n\nusage: hyst_ident_node [--ros-args -p bags:=[...] -p watch_dir:=DIR -p params_file:=P -p controller_node:=/hyst_controller ...]\nParameters are documented in the module docstring and README.')
+        return
     rclpy.init(args=args)
     node = None
     try:
