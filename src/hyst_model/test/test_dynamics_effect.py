@@ -165,7 +165,44 @@ def test_series_structure_wraps_the_inner_model():
     t = np.arange(3000) * 1e-3
     u = 75 + 75 * np.sin(2 * np.pi * 5 * t)
     yb = base.simulate(tb, t, u)
-    assert np.allclose(model.simulate(theta, t, u), series_filter(yb, 20.0, 0.1, 1e-3))
+    assert model.effects[0].hold == "zoh"  # the DAC holds the voltage: the default
+    assert np.allclose(model.simulate(theta, t, u), series_filter(yb, 20.0, 0.1, 1e-3, "zoh"))
+    foh = build_model("mbw", ["dynamics"], {**cfg, "dynamics.hold": "foh"})
+    assert np.allclose(foh.simulate(theta, t, u), series_filter(yb, 20.0, 0.1, 1e-3, "foh"))
+    assert not np.allclose(foh.simulate(theta, t, u), model.simulate(theta, t, u), rtol=0, atol=1e-9)
+
+
+def test_zoh_series_is_exact_for_a_held_step():
+    """A held step is what ZOH assumes: sample k after the step is the continuous step response at
+    (k + 1)·dt (sample k reads the stage at the end of the period its input was held over)."""
+    dt, fn, z = 1e-3, 350.0, 0.04
+    x = np.r_[np.zeros(5), np.ones(60)]
+    y = series_filter(x, fn, z, dt, "zoh")
+    wn = 2 * np.pi * fn
+    wd = wn * np.sqrt(1 - z * z)
+    tt = (np.arange(60) + 1) * dt
+    step = 1 - np.exp(-z * wn * tt) * (np.cos(wd * tt) + z / np.sqrt(1 - z * z) * np.sin(wd * tt))
+    assert np.allclose(y[:5], 0.0) and np.allclose(y[5:], step, atol=1e-12)
+    # the first-order hold sees a ramp over the first period instead: a different, smaller first sample
+    assert series_filter(x, fn, z, dt, "foh")[5] < 0.9 * y[5]
+    with pytest.raises(EffectError, match="hold"):
+        series_filter(x, fn, z, dt, "cubic")
+
+
+def test_feedback_structure_marks_the_base_recursion_inactive():
+    cfg = {"dt": 1e-3, "u_scale": 15.0, "y_scale": 5e-6}
+    fb = build_model("mbw", ["dynamics"], {**cfg, "dynamics.structure": "feedback"})
+    assert [fb.names[i] for i in fb.inactive] == [n for n in fb.base.names if n != "offset"]
+    t = np.arange(500) * 1e-3
+    u = 75 + 75 * np.sin(2 * np.pi * 5 * t)
+    th = fb.theta0.copy()
+    th2 = th.copy()
+    th2[list(fb.inactive)] *= 0.5  # the base recursion's parameters really do not matter
+    assert np.array_equal(fb.simulate(th, t, u), fb.simulate(th2, t, u))
+    # series dynamics and rate (which reads the BW parameters) leave everything active
+    assert build_model("mbw", ["dynamics"], cfg).inactive == ()
+    assert build_model("bw", ["rate"], cfg).inactive == ()
+    assert [v["dynamics.structure"] for v in DynamicsEffect.variants()] == ["series", "feedback"]
 
 
 def test_bad_configuration_is_one_clear_error():
@@ -173,6 +210,8 @@ def test_bad_configuration_is_one_clear_error():
         DynamicsEffect({"dynamics.structure": "parallel"})
     with pytest.raises(EffectError, match="interp"):
         DynamicsEffect({"dynamics.interp": "cubic"})
+    with pytest.raises(EffectError, match="hold"):
+        DynamicsEffect({"dynamics.hold": "soh"})
     with pytest.raises(EffectError, match="replaces the base"):
         build_model("bw", ["rate", "dynamics"], {"dynamics.structure": "feedback"})
 

@@ -367,7 +367,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
 
     def screen_on(inner: Model, th_inner: np.ndarray, chosen: list[str], nm: str, prior: dict | None):
         """Fit only effect ``nm`` (+ offset) on top of a fixed inner model; return (val RMSE, effect values)."""
-        if EFFECTS[nm].kind == "base":  # replaces the base recursion: only a full refit can tell
+        if compose(base_model, [nm], cfg).effects[-1].kind == "base":
+            # replaces the base recursion (configuration may decide it): only a full refit can tell
             m, th, yh = refit(base_model, chosen + [nm], cfg, t, u, y, th_base, prior, fit_)
             return _rmse((y - yh)[val]), _effect_values(m, th, nm), (m, th, y - yh)
         fx = Fixed(inner, th_inner)
@@ -392,14 +393,30 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
             score = float(np.clip(score, 0.0, 1.0))
         except Exception as err:  # noqa: BLE001 - a user effect's test must not sink the diagnosis
             score, ev = 0.0, f"its residual test failed ({type(err).__name__}: {err})"
-        try:
-            r, vals, done = screen_on(base_model, th_base, [], nm, None)
+        variants = list(getattr(EFFECTS[nm], "variants", lambda: [{}])()) or [{}]
+        tried: list[tuple[float, dict, dict, tuple | None]] = []
+        errors = []
+        for var in variants:  # e.g. dynamics in both structures: keep whichever validates better
+            cfg.update(var)  # an effect reads only its own "<name>.*" keys, so the shared config can carry it
+            try:
+                r_v, vals_v, done_v = screen_on(base_model, th_base, [], nm, None)
+                tried.append((r_v, var, vals_v, done_v))
+            except (FitError, EffectError) as err:
+                errors.append(str(err))
+        if tried:
+            r, var, vals, done = min(tried, key=lambda x: x[0])
+            cfg.update(var)
             carry[nm] = vals
             if done is not None:
                 full[nm] = done
-        except (FitError, EffectError) as err:
+            if len(tried) > 1:
+                def _lbl(vv: dict) -> str:
+                    return ", ".join(f"{k.split('.', 1)[-1]} {v}" for k, v in vv.items())
+                ev += ("; tried " + " and ".join(f"{_lbl(vv)} ({fmt_len(rv)} on validation)"
+                                                 for rv, vv, _, _ in tried) + f": kept {_lbl(var)}")
+        else:
             r = math.inf
-            ev = f"{ev}; the fit failed: {err}"
+            ev = f"{ev}; the fit failed: {'; '.join(errors)}"
         cands[nm] = Candidate(nm, r, math.nan, base_val / r if r > 0 else math.inf, False, score, ev,
                               params=carry.get(nm, {}))
         say(f"screen {base}+{nm}: validation RMSE {fmt_len(r)} ({base_val / r:.2f}×), residual test "

@@ -85,6 +85,9 @@ class Effect:
     conflicts: ClassVar[tuple[str, ...]] = ()
     #: Base model names this effect applies to; empty = any.
     bases: ClassVar[tuple[str, ...]] = ()
+    #: Base parameters a kind-``base`` effect still reads (None: all of them). An effect that replaces the
+    #: base recursion outright lists only those it keeps (e.g. ``("offset",)``), so fitters skip the rest.
+    base_params_used: ClassVar[tuple[str, ...] | None] = None
 
     def __init__(self, config: Mapping[str, object] | None = None):
         cfg = dict(config or {})
@@ -194,6 +197,17 @@ class ComposedModel(Model):
 
     def params(self) -> tuple[Param, ...]:
         return self._params
+
+    @property
+    def inactive(self) -> tuple[int, ...]:
+        """Indices of packed parameters the output does not depend on: the base parameters a kind-``base``
+        effect does not read (:attr:`Effect.base_params_used`). Fitters skip them (no wasted
+        finite-difference simulations); they stay at their start."""
+        for e in self.effects:
+            used = getattr(e, "base_params_used", None)
+            if e.kind == "base" and used is not None:
+                return tuple(i for i, p in enumerate(self.base.params()) if p.name not in used)
+        return ()
 
     def split(self, theta: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
         """Base parameters and each effect's local parameters from a packed vector."""

@@ -42,6 +42,7 @@ class TrainProblem:
         self.lower, self.upper = lo.astype(np.float64), hi.astype(np.float64)
         self.has_jac = hasattr(model, "simulate_jac")
         self.has_normal = hasattr(model, "normal_equations")
+        self.inactive = frozenset(getattr(model, "inactive", ()))
 
     def simulate(self, theta: np.ndarray) -> np.ndarray:
         self.n_eval += 1
@@ -64,6 +65,7 @@ class TrainProblem:
         p.lower, p.upper = lo.astype(np.float64), hi.astype(np.float64)
         p.has_jac = hasattr(model, "simulate_jac")
         p.has_normal = hasattr(model, "normal_equations")
+        p.inactive = frozenset(getattr(model, "inactive", ()))
         return p
 
     def jac(self, theta: np.ndarray) -> np.ndarray:
@@ -86,12 +88,18 @@ class TrainProblem:
         return r, J[self.a:] / self.scale
 
     def fd_residuals_jac(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residuals and a forward-difference Jacobian (p + 1 simulations), stepping inward at bounds."""
+        """Residuals and a forward-difference Jacobian (p + 1 simulations), stepping inward at bounds.
+
+        Parameters the model declares ``inactive`` (the output does not depend on them) get a zero column
+        without a simulation.
+        """
         theta = np.asarray(theta, dtype=np.float64)
         r0 = self.residuals(theta)
-        J = np.empty((r0.size, theta.size))
+        J = np.zeros((r0.size, theta.size))
         span = self.upper - self.lower
         for i in range(theta.size):
+            if i in self.inactive:
+                continue
             h = 1e-6 * max(abs(theta[i]), 1e-3 * span[i] if np.isfinite(span[i]) else 1e-3, 1e-12)
             if theta[i] + h > self.upper[i]:
                 h = -h

@@ -17,8 +17,9 @@ iteration; on 60k-sample records it took 40–135 s per composed-model refit aga
 δ1, δ2 and the offset are fitted too; the LSQM baseline (:mod:`.lsq`) keeps scipy's solver.
 
 Any model works: a composed model (``.base`` + effects) first fits its base alone (equation-error start + exact
-LM), then the full model from there with the effect parameters at their declared defaults; other models start from
-their defaults.
+LM), then the full model from there with the effect parameters at their data-driven start (``Effect.start`` on the
+base's training residual; for input effects such as delay the base is refitted on the transformed input) or at
+their declared defaults, whichever costs less; other models start from their defaults.
 """
 from __future__ import annotations
 
@@ -237,19 +238,50 @@ class FastFit(Estimator):
         if base is model:
             return [problem.clip(th) for th in self._base_starts(problem, base)] or [theta0]
         # composed model: fit the base alone first (exact Jacobian, cheap), then start the full model there with
-        # the effects at their declared defaults — one start, because every full iteration costs p + 1 runs
+        # the effects at their data-driven starts (Effect.start on the base's training residual) or at their
+        # declared defaults, whichever costs less — one start, because every full iteration costs p + 1 runs
         bp = problem.for_model(base)
+        best = self._fit_base(bp, base)
+        problem.n_eval += bp.n_eval
+        if best is None:
+            return [theta0]
+        self._say(f"fast: base {base.name} alone -> training RMSE {best[1]:.4g} m; now the full model")
+        th_default = problem.clip(model.pack(base.unpack(best[0])))
+        if not hasattr(model, "start"):
+            return [th_default]
+        th_data = self._data_start(problem, model, base, best[0])
+        c_def, c_data = problem.cost(th_default), problem.cost(th_data)
+        self._say(f"fast: effects at their defaults -> {c_def:.4g} m, at their data-driven start -> {c_data:.4g} m")
+        return [th_data if c_data < c_def else th_default]
+
+    def _fit_base(self, bp: TrainProblem, base: MBWModel) -> tuple[np.ndarray, float] | None:
         best = None
         for th in self._base_starts(bp, base):
             sol = self._run(bp, bp.clip(th), max(self.max_nfev // 3, 10))
             c = bp.cost(sol.x)
             if best is None or c < best[1]:
                 best = (sol.x, c)
-        problem.n_eval += bp.n_eval
-        if best is None:
-            return [theta0]
-        self._say(f"fast: base {base.name} alone -> training RMSE {best[1]:.4g} m; now the full model")
-        return [problem.clip(model.pack(base.unpack(best[0])))]
+        return best
+
+    def _data_start(self, problem: TrainProblem, model: Model, base: MBWModel, th_base: np.ndarray) -> np.ndarray:
+        """Effects' data-driven start on the training data; for input-side effects (delay) the base is refitted
+        on the input as the effects transform it there — a base fitted without the effect imitates it (its δ
+        terms mimic a delay) and the joint fit stalls in that basin (the same steps as ``hyst diagnose``)."""
+        with np.errstate(all="ignore"):
+            th = np.asarray(model.start(problem.t, problem.u, problem.y_full, th_base), dtype=np.float64)
+        inputs = [(e, te) for e, te in zip(model.effects, model.split(th)[1]) if e.kind == "input"]
+        if inputs:
+            uu = problem.u
+            for e, te in inputs:
+                uu = e.input(te, problem.t, uu)
+            bp = problem.for_model(base)
+            bp.u = np.asarray(uu, dtype=np.float64)
+            refit = self._fit_base(bp, base)
+            problem.n_eval += bp.n_eval
+            if refit is not None:
+                th = th.copy()
+                th[: len(base.names)] = refit[0]
+        return problem.clip(th)
 
     def _run(self, problem: TrainProblem, x0: np.ndarray, nfev: int):
         # exact sensitivities (MBW/BW) or forward differences (any other model) into the compact LM; on long
