@@ -28,6 +28,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from hyst_model.core import PARAM_NAMES, MBWParams, pea_default
+from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .base import check_model, hand_over
 from .dmrac import TABLE53, DMRACGains
@@ -113,6 +114,9 @@ class ControllerNode(Node):
         super().__init__("hyst_controller", **kwargs)
         self._declare()
         self._settings = self._read()  # start-up values were validated by _read
+        self.scheduling = set_realtime(int(self.get_parameter("rt_priority").value))
+        if self.get_parameter("rt_priority").value and self.scheduling.policy != "fifo":
+            self.get_logger().warning(f"{self.scheduling.note}; running with normal scheduling")
         self._ctrl = None
         self._y = math.nan
         self._ref = None  # (t_stamp, r, rdot)
@@ -133,7 +137,8 @@ class ControllerNode(Node):
         self.create_subscription(JointState, "/stage/reference", self._on_reference, 10)
         self.create_timer(0.02, self._watchdog)
         self.create_timer(1.0, self._diagnostics)
-        self.get_logger().info(f"controller ready: {self._settings.algorithm} at {self._settings.rate:g} Hz")
+        self.get_logger().info(f"controller ready: {self._settings.algorithm} at {self._settings.rate:g} Hz, "
+                               f"scheduling {self.scheduling}")
 
     # Parameters -----------------------------------------------------------------------------------------
     def _declare(self) -> None:
@@ -154,6 +159,10 @@ class ControllerNode(Node):
         d("reference", "", ParameterDescriptor(
             description="'' = follow /stage/reference; a spec (sine:5, step, c1, ...) = generate it internally "
                         "at the state stamps (deterministic, e.g. with a lockstep sim); time 0 = first state"))
+        d("rt_priority", 0, ParameterDescriptor(
+            description="SCHED_FIFO priority of the node's threads (0 = normal scheduling; applies at start; "
+                        "see hyst_model.runtime)", read_only=True,
+            integer_range=[IntegerRange(from_value=0, to_value=RT_PRIORITY_MAX, step=1)]))
         d("state_decimation", 10, ParameterDescriptor(
             description="publish /controller/state every N samples", integer_range=[IntegerRange(
                 from_value=1, to_value=100_000, step=1)]))
@@ -384,7 +393,14 @@ def main(args=None) -> int:
             executor = rclpy.executors.SingleThreadedExecutor()
         executor.add_node(node)
         while rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except RuntimeError:
+                # SIGINT/SIGTERM shut the context down under a waiting EventsExecutor.spin_once, which then
+                # raises a bare pybind11 RuntimeError: that is a normal stop, anything else is not
+                if rclpy.ok():
+                    raise
+                break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ControlError, ValueError) as err:

@@ -27,6 +27,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
+from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
 from hyst_sim.profiles import get_profile
 
 from .adapter import PROTOCOLS, make_adapter
@@ -55,6 +56,7 @@ class DriverConfig:
     safe_ramp_rate: float
     link_timeout: float
     frame_id: str
+    rt_priority: int = 0
 
     def validate(self) -> "DriverConfig":
         """Cross-parameter checks; raises :class:`ConfigError` with a reason."""
@@ -101,6 +103,8 @@ def param_table(prof) -> list[tuple[str, object, tuple | None, str]]:
         ("safe_ramp_rate", 100.0, (1e-3, 1e9), "rate of the ramps to v_safe, V/s (never above slew_max)"),
         ("link_timeout", 0.5, (0.005, 60.0), "no sample for this long (s): close the port and reconnect"),
         ("frame_id", "stage", None, "header.frame_id of /stage/state"),
+        ("rt_priority", 0, (0, RT_PRIORITY_MAX), "SCHED_FIFO priority of the I/O and executor threads "
+         "(0 = normal scheduling; needs CAP_SYS_NICE or an rtprio limit; see hyst_model.runtime)"),
     ]
 
 
@@ -123,7 +127,7 @@ class DriverNode(Node):
     """Serial driver for the PEA/GMA amplifier and displacement sensor (see module docstring)."""
 
     #: Parameters that need a new connection; changing them at run time is refused with a reason.
-    RESTART = ("port", "baud", "protocol", "rate", "profile", "counts_to_m", "link_timeout")
+    RESTART = ("port", "baud", "protocol", "rate", "profile", "counts_to_m", "link_timeout", "rt_priority")
 
     def __init__(self, **kwargs) -> None:
         super().__init__("hyst_driver", **kwargs)
@@ -154,10 +158,16 @@ class DriverNode(Node):
         self.io_errors = 0
         self._latency: deque[int] = deque(maxlen=2000)  # ns, sample time -> command arrival
         self._stop = threading.Event()
+        # before any loop thread starts: the I/O thread (and the executor thread main() starts) inherit it
+        self.scheduling = set_realtime(c.rt_priority)
+        if c.rt_priority and self.scheduling.policy != "fifo":
+            self.get_logger().warning(f"rt_priority {c.rt_priority}: {self.scheduling.note}; running with normal "
+                                      "scheduling (the 1 kHz loop may miss deadlines under load)")
         self._io = threading.Thread(target=self._io_loop, name="hyst_driver_io", daemon=True)
         self._io.start()
         self.get_logger().info(f"{c.protocol} device on {c.port}, profile {c.profile}, {c.rate:g} Hz, "
-                               f"limits [{c.v_min}, {c.v_max}] V, {c.slew_max:g} V/s, safe {c.v_safe} V")
+                               f"limits [{c.v_min}, {c.v_max}] V, {c.slew_max:g} V/s, safe {c.v_safe} V, "
+                               f"scheduling {self.scheduling}")
 
     # ------------------------------------------------------------ parameters
     def _read_config(self, changes: dict) -> DriverConfig:
@@ -263,7 +273,8 @@ class DriverNode(Node):
               "writes": h.writes, "commanded_v": h.commanded_v, "applied_v": h.applied_v,
               "clipped": h.clipped, "rejected": h.rejected, "slew_limited": h.slew_limited,
               "watchdog_active": h.watchdog_active, "bad_commands": self.bad_commands, "io_errors": self.io_errors,
-              "v_min": self.cfg.v_min, "v_max": self.cfg.v_max, "v_safe": self.cfg.v_safe}
+              "v_min": self.cfg.v_min, "v_max": self.cfg.v_max, "v_safe": self.cfg.v_safe,
+              "scheduling": str(self.scheduling)}
         lat = sorted(self._latency)
         if lat:
             kv.update({"latency_ms.p50": lat[len(lat) // 2] * 1e-6,

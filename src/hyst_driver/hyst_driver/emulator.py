@@ -25,6 +25,8 @@ import time
 import tty
 from dataclasses import dataclass
 
+from hyst_model.runtime import set_realtime
+
 from . import protocol_ascii as hdb
 from . import protocol_gcs as gcs
 from .errors import ProtocolError
@@ -335,6 +337,9 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--nice", type=int, default=0,
                     help="change the scheduling priority (negative = higher; needs privileges): a real DAQ bridge "
                          "has its own microcontroller and never waits for a busy host")
+    ap.add_argument("--rt-priority", type=int, default=0,
+                    help="SCHED_FIFO priority 1-98 for the emulated device (0 = normal scheduling; needs "
+                         "CAP_SYS_NICE): as --nice, but the host's load cannot delay a tick at all")
     return ap.parse_args(argv)
 
 
@@ -376,6 +381,13 @@ def main(argv: list[str] | None = None) -> int:
             os.nice(args.nice)
         except OSError as err:
             print(f"hyst_emulator: priority unchanged ({err}); timing follows the host's load", file=sys.stderr)
+    try:
+        sched = set_realtime(args.rt_priority)
+    except ValueError as err:
+        print(f"hyst_emulator: {err}", file=sys.stderr)
+        return 2
+    if args.rt_priority and sched.policy != "fifo":
+        print(f"hyst_emulator: {sched.note}; timing follows the host's load", file=sys.stderr)
     signal.signal(signal.SIGTERM, _raise_interrupt)  # `kill` cleans up the port link like Ctrl-C
     emu = PtyEmulator(dev, args.link, rates, seed=args.seed)
     try:

@@ -39,6 +39,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
+
 from .errors import SimError
 from .plant import Plant, PlantConfig
 from .profiles import get_profile
@@ -135,6 +137,10 @@ class SimNode(Node):
         self._stop = threading.Event()
         self._timer = None
         self._sampler = None
+        # before the sampler thread starts, which inherits it
+        self.scheduling = set_realtime(int(self.get_parameter("rt_priority").value))
+        if self.get_parameter("rt_priority").value and self.scheduling.policy != "fifo":
+            self.get_logger().warning(f"{self.scheduling.note}; running with normal scheduling")
         if self._settings.mode == "realtime":
             self._sampler = threading.Thread(target=self._sample_loop, name="hyst_sim_sampler", daemon=True)
             self._sampler.start()
@@ -145,7 +151,7 @@ class SimNode(Node):
         self.get_logger().info(
             f"simulated stage: profile {self._settings.profile}, {self._settings.rate:g} Hz, mode "
             f"{self._settings.mode}, model {'from ' + self._settings.params_file if self._settings.params_file else 'embedded default'}"
-            f"{', scenario loaded' if self._settings.scenario_file else ''}")
+            f"{', scenario loaded' if self._settings.scenario_file else ''}, scheduling {self.scheduling}")
 
     # Parameters ---------------------------------------------------------------------------------------------
     def _declare_parameters(self) -> None:
@@ -177,6 +183,10 @@ class SimNode(Node):
             description="hidden-effects scenario file ('' = none); its contents are never reported"))
         d("seed", 0, ParameterDescriptor(description="seed of sensor noise and drift (applies at start)",
                                          integer_range=[IntegerRange(from_value=0, to_value=2**31 - 1, step=1)]))
+        d("rt_priority", 0, ParameterDescriptor(
+            description="SCHED_FIFO priority of the node's threads, as the driver's (0 = normal scheduling; "
+                        "applies at start; see hyst_model.runtime)", read_only=True,
+            integer_range=[IntegerRange(from_value=0, to_value=RT_PRIORITY_MAX, step=1)]))
         for name in EFFECT_NAMES:
             spec = Effects.spec(name)
             default = {"noise": prof.sensor_noise, "quantization": prof.sensor_resolution}.get(name, 0.0)

@@ -1,0 +1,56 @@
+"""hyst_model.runtime: real-time scheduling for the loop nodes, and what happens when it is not allowed."""
+import os
+import subprocess
+import sys
+
+import pytest
+
+from hyst_model import runtime
+from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
+
+
+def test_zero_keeps_normal_scheduling_and_bad_values_are_one_error():
+    s = set_realtime(0)
+    assert s.policy == "normal" and s.priority == 0 and str(s) == "normal (rt_priority 0)"
+    for bad in (-1, RT_PRIORITY_MAX + 1, 99):
+        with pytest.raises(ValueError, match="rt_priority must be 0"):
+            set_realtime(bad)
+
+
+def test_refused_permission_is_reported_not_raised(monkeypatch):
+    def refuse(*_):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    s = set_realtime(30)
+    assert s.policy == "normal" and "refused" in s.note and "CAP_SYS_NICE" in str(s)
+
+
+def test_every_thread_of_the_process_gets_fifo_where_allowed():
+    """In a child process (the test process keeps its scheduling): threads started before the call (like the
+    middleware's receive threads) and after it both end up SCHED_FIFO at the priority."""
+    code = """
+import os, threading, time
+from hyst_model.runtime import set_realtime
+ev = threading.Event(); seen = {}
+def early():
+    seen['early'] = threading.get_native_id(); ev.wait()
+t = threading.Thread(target=early); t.start(); time.sleep(0.05)
+s = set_realtime(17)
+def late():
+    seen['late'] = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+t2 = threading.Thread(target=late); t2.start(); t2.join()
+pol_early = (os.sched_getscheduler(seen['early']), os.sched_getparam(seen['early']).sched_priority)
+ev.set(); t.join()
+print(s.policy, pol_early == (os.SCHED_FIFO, 17), seen['late'] == (os.SCHED_FIFO, 17))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    policy, early, late = out.stdout.split()
+    if policy != "fifo":
+        pytest.skip("this machine does not allow SCHED_FIFO (needs CAP_SYS_NICE or an rtprio limit)")
+    assert early == "True" and late == "True"
+
+
+def test_thread_list_is_this_process():
+    assert os.getpid() in runtime._threads() or not runtime._threads()
