@@ -35,10 +35,19 @@ from std_msgs.msg import String
 
 from .core.mbw import PARAM_NAMES
 from .errors import HystError
+from .runtime import wants_help
 
 __all__ = ["IdentConfig", "IdentNode", "main", "fit_bag", "controller_parameters"]
 
 _METHODS = ("fast", "epso", "lsq")
+
+USAGE = (
+    'hyst_ident_node: refit the stage model from rosbag2 recordings (given bags or a watched folder), write the\n'
+    'ROS 2 params file and optionally push model.* to a running controller node.\n'
+    '\n'
+    'usage: hyst_ident_node [--ros-args -p bags:=[...] -p watch_dir:=DIR -p params_file:=P -p controller_node:=/hyst_controller ...]\n'
+    'Parameters are documented in the module docstring and README.'
+)
 
 
 @dataclass(frozen=True)
@@ -325,11 +334,7 @@ class IdentNode(Node):
 
 
 def main(args=None) -> None:
-    import sys as _sys
-    argv = _sys.argv[1:] if args is None else list(args)
-    own = argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv  # ROS args are not ours
-    if "--help" in own or "-h" in own:
-        print('hyst_ident_node: refit the stage model from rosbag2 recordings (given bags or a watched folder), write the\nROS 2 params file and optionally push model.* to a running controller node.\n\nusage: hyst_ident_node [--ros-args -p bags:=[...] -p watch_dir:=DIR -p params_file:=P -p controller_node:=/hyst_controller ...]\nParameters are documented in the module docstring and README.')
+    if wants_help(args, USAGE):
         return
     rclpy.init(args=args)
     node = None

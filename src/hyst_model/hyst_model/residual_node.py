@@ -48,9 +48,17 @@ from sensor_msgs.msg import JointState
 from .core import mbw_rest_state, mbw_step
 from .errors import HystError
 from .model import MBWModel, Model
+from .runtime import wants_help
 from .spec import build_model
 
 __all__ = ["ResidualNode", "ResidualSettings", "main"]
+
+USAGE = (
+    'hyst_residual_node: run the model from a params file next to /stage/state and publish /model/prediction and\n'
+    '/model/residual (m), stamped like the state sample.\n'
+    '\n'
+    'usage: hyst_residual_node --ros-args --params-file stage.yaml [-p reset_gap:=0.5 ...]'
+)
 
 
 @dataclass(frozen=True)
@@ -281,11 +289,7 @@ class ResidualNode(Node):
 
 def main(args=None) -> int:
     """Console script ``hyst_residual_node`` (``--ros-args --params-file P``)."""
-    import sys as _sys
-    argv = _sys.argv[1:] if args is None else list(args)
-    own = argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv  # ROS args are not ours
-    if "--help" in own or "-h" in own:
-        print('hyst_residual_node: run the model from a params file next to /stage/state and publish /model/prediction and\n/model/residual (m), stamped like the state sample.\n\nusage: hyst_residual_node --ros-args --params-file stage.yaml [-p reset_gap:=0.5 ...]')
+    if wants_help(args, USAGE):
         return
     rclpy.init(args=args)
     node = None

@@ -1,4 +1,5 @@
-"""Process-level helpers for the nodes that close a 1 kHz loop (rclpy-free, so they are tested without ROS).
+"""Process-level helpers for the nodes (rclpy-free, so they are tested without ROS): command-line handling that
+leaves ROS arguments alone, and real-time scheduling for the nodes that close a 1 kHz loop.
 
 Real-time scheduling
 --------------------
@@ -19,7 +20,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-__all__ = ["Scheduling", "set_realtime", "RT_PRIORITY_MAX"]
+__all__ = ["Scheduling", "set_realtime", "RT_PRIORITY_MAX", "own_args", "wants_help"]
 
 #: Highest priority offered: 99 is left to the kernel's own watchdog threads.
 RT_PRIORITY_MAX = 98
@@ -83,3 +84,21 @@ def _threads() -> list[int]:
         return [int(t) for t in os.listdir("/proc/self/task")]
     except OSError:
         return []
+
+
+def own_args(args: list[str] | None) -> list[str]:
+    """The node's own command-line words: ``args`` (default ``sys.argv``) without the program name and without
+    everything from ``--ros-args`` on, which belongs to ROS."""
+    import sys
+    argv = sys.argv[1:] if args is None else list(args)
+    return argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv
+
+
+def wants_help(args: list[str] | None, usage: str) -> bool:
+    """Print ``usage`` and return True when the node was asked for ``-h``/``--help`` (before ROS starts, so
+    ``ros2 run PKG NODE --help`` answers without a middleware)."""
+    own = own_args(args)
+    if "--help" in own or "-h" in own:
+        print(usage)
+        return True
+    return False

@@ -54,3 +54,11 @@ print(s.policy, pol_early == (os.SCHED_FIFO, 17), seen['late'] == (os.SCHED_FIFO
 
 def test_thread_list_is_this_process():
     assert os.getpid() in runtime._threads() or not runtime._threads()
+
+
+def test_help_is_ours_only_before_ros_args(capsys):
+    from hyst_model.runtime import own_args, wants_help
+    assert own_args(["-h", "--ros-args", "-p", "a:=1"]) == ["-h"]
+    assert own_args(["--ros-args", "--help"]) == []
+    assert wants_help(["--help"], "usage: x") and capsys.readouterr().out == "usage: x\n"
+    assert not wants_help(["--ros-args", "-h"], "usage: x") and capsys.readouterr().out == ""

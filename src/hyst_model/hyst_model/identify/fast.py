@@ -201,16 +201,21 @@ class FastFit(Estimator):
         Output-error runs from the best distinct starts.
     max_nfev : int
         Iteration budget of the final output-error run (each start gets a third of it first).
+    theta0 : array_like, optional
+        Start here instead (no equation-error stage): the output-error LM alone, for refits from a good start
+        (``hyst diagnose``).
     split, progress
         See :class:`~hyst_model.identify.base.Estimator`.
     """
 
     method = "fast"
 
-    def __init__(self, model: Model, *, n_starts: int = 3, max_nfev: int = 120, split=0.25, progress=None):
+    def __init__(self, model: Model, *, n_starts: int = 3, max_nfev: int = 120, theta0=None, split=0.25,
+                 progress=None):
         super().__init__(model, split=split, progress=progress)
         self.n_starts = int(n_starts)
         self.max_nfev = int(max_nfev)
+        self.theta0 = None if theta0 is None else np.asarray(theta0, dtype=np.float64)
 
     def _base_starts(self, problem: TrainProblem, base: MBWModel) -> list[np.ndarray]:
         """Distinct equation-error starts for an MBW/BW model, best first."""
@@ -231,6 +236,8 @@ class FastFit(Estimator):
 
     def _starts(self, problem: TrainProblem) -> list[np.ndarray]:
         model = self.model
+        if self.theta0 is not None:
+            return [problem.clip(self.theta0)]
         base = getattr(model, "base", model)
         theta0 = problem.clip(model.theta0)
         if not isinstance(base, MBWModel):
