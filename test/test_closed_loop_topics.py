@@ -43,15 +43,21 @@ def _stamp(m) -> float:
 
 @pytest.fixture
 def loop_processes():
+    """Starts the loop's processes on demand (sim first, then the controller) and stops them at the end."""
     env = dict(os.environ)
-    procs = [
-        subprocess.Popen([sys.executable, "-c", SIM, "--ros-args", "-p", f"rate:={RATE}", "-p", "mode:=lockstep"],
-                         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT),
-        subprocess.Popen([str(BIN / "hyst_controller_node"), "--ros-args", "-p", f"rate:={RATE}",
-                          "-p", "algorithm:=dppc", "-p", "reference:=sine:5", "-p", "state_decimation:=100",
-                          "-p", "watchdog_periods:=1000000"],  # lockstep pauses are not a lost stage
-                         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)]
-    yield procs
+    procs: list[subprocess.Popen] = []
+    cmds = {
+        "sim": [sys.executable, "-c", SIM, "--ros-args", "-p", f"rate:={RATE}", "-p", "mode:=lockstep"],
+        "controller": [str(BIN / "hyst_controller_node"), "--ros-args", "-p", f"rate:={RATE}",
+                       "-p", "algorithm:=dppc", "-p", "reference:=sine:5", "-p", "state_decimation:=100",
+                       "-p", "watchdog_periods:=1000000"],  # lockstep pauses are not a lost stage
+    }
+
+    def start(name: str) -> subprocess.Popen:
+        procs.append(subprocess.Popen(cmds[name], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT))
+        return procs[-1]
+
+    yield start
     for p in procs:
         p.terminate()
     for p in procs:
@@ -71,6 +77,16 @@ def test_topics_match_in_process_and_switching_is_bumpless(loop_processes):
     node.create_subscription(JointState, "/stage/command", lambda m: cmds.__setitem__(_stamp(m), m.effort[0]), 1000)
     client = AsyncParameterClient(node, "hyst_controller")
     try:
+        # The lockstep sim repeats its first sample until a command answers it: once this node hears it, it is
+        # matched to the sim and will see the whole run from t = 0 (DDS discovery order would otherwise decide
+        # how much of the start it misses). Only then does the controller, which starts the loop, come up.
+        node.create_publisher(JointState, "/stage/command", 1)  # never publishes: lets the sim announce
+        loop_processes("sim")
+        t_end = time.monotonic() + 60.0
+        while not states and time.monotonic() < t_end:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        assert states, "the lockstep sim never announced its first sample"
+        loop_processes("controller")
         assert client.wait_for_services(timeout_sec=30.0), "controller parameter services never appeared"
         pending = list(SWITCHES)
         deadline = time.monotonic() + 150.0
