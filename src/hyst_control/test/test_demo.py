@@ -31,3 +31,17 @@ def test_demo_refuses_a_bad_schedule_with_one_line(tmp_path):
     assert proc.returncode == 2
     assert "hyst demo: error:" in proc.stderr and "Traceback" not in proc.stderr
     assert not list(tmp_path.glob("demo_*"))
+
+
+def test_warm_up_runs_each_algorithm_and_rejects_unknown_ones():
+    from hyst_control.errors import ControlError
+    from hyst_control.loop import warm_up
+    assert warm_up(["dppc", "dmrac", "pid", "open_loop"], 2000.0) > 0.0
+    with pytest.raises(ControlError):
+        warm_up(["wobble"], 2000.0)
+
+
+def test_demo_refuses_a_bad_rt_priority_with_one_line(tmp_path):
+    proc = subprocess.run([HYST, "demo", "--rt-priority", "120", "--bags", str(tmp_path)], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0 and "rt-priority" in proc.stderr
