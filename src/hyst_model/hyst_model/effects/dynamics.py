@@ -81,16 +81,23 @@ BENCHMARK_TRUTH: dict[str, float] = {
 
 
 # ------------------------------------------------------------------------------------------------ series
-def _foh_matrices(fn: float, zeta: float, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Exact discretisation of ωn²/(s²+2ζωn s+ωn²) for a piecewise-linear input: Φ, Γ1, Γ2 (see series_filter)."""
+def _expm_with_input(fn: float, zeta: float, dt: float, ramp: bool) -> np.ndarray:
+    """exp(M·dt) of the resonance (y, ẏ) augmented by its input (held, or a ramp: input and slope states)."""
     wn = 2.0 * np.pi * fn
-    M = np.zeros((4, 4))
+    n = 4 if ramp else 3
+    M = np.zeros((n, n))
     M[0, 1] = 1.0
     M[1, 0] = -wn * wn
     M[1, 1] = -2.0 * zeta * wn
     M[1, 2] = wn * wn
-    M[2, 3] = 1.0  # input slope state
-    E = expm(M * dt)
+    if ramp:
+        M[2, 3] = 1.0  # input slope state
+    return expm(M * dt)
+
+
+def _foh_matrices(fn: float, zeta: float, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact discretisation of ωn²/(s²+2ζωn s+ωn²) for a piecewise-linear input: Φ, Γ1, Γ2 (see series_filter)."""
+    E = _expm_with_input(fn, zeta, dt, ramp=True)
     return E[:2, :2].copy(), E[:2, 2].copy(), E[:2, 3].copy() / dt
 
 
@@ -100,13 +107,7 @@ def _zoh_matrices(fn: float, zeta: float, dt: float) -> tuple[np.ndarray, np.nda
     Written in the first-order-hold form of :func:`_series_run` (Γ1 = Γ2 = Γ, so Γ1 x_k + Γ2 (x_{k+1} − x_k)
     = Γ x_{k+1}).
     """
-    wn = 2.0 * np.pi * fn
-    M = np.zeros((3, 3))
-    M[0, 1] = 1.0
-    M[1, 0] = -wn * wn
-    M[1, 1] = -2.0 * zeta * wn
-    M[1, 2] = wn * wn
-    E = expm(M * dt)
+    E = _expm_with_input(fn, zeta, dt, ramp=False)
     g = E[:2, 2].copy()
     return E[:2, :2].copy(), g, g.copy()
 
