@@ -72,8 +72,14 @@ def test_topics_match_in_process_and_switching_is_bumpless(loop_processes):
     node = rclpy.create_node("closed_loop_test")
     states: dict[float, float] = {}
     cmds: dict[float, float] = {}
-    node.create_subscription(JointState, "/stage/state", lambda m: states.__setitem__(_stamp(m), m.position[0]),
-                             1000)
+    latest = [0.0]  # newest state stamp, kept in the callback: max(states) per spin would be O(n) per message
+
+    def on_state(m) -> None:
+        t = _stamp(m)
+        states[t] = m.position[0]
+        latest[0] = max(latest[0], t)
+
+    node.create_subscription(JointState, "/stage/state", on_state, 1000)
     node.create_subscription(JointState, "/stage/command", lambda m: cmds.__setitem__(_stamp(m), m.effort[0]), 1000)
     client = AsyncParameterClient(node, "hyst_controller")
     try:
@@ -93,7 +99,7 @@ def test_topics_match_in_process_and_switching_is_bumpless(loop_processes):
         futures = []
         while time.monotonic() < deadline:
             rclpy.spin_once(node, timeout_sec=0.05)
-            t_now = max(states) if states else 0.0
+            t_now = latest[0]
             if pending and t_now >= pending[0][0]:
                 futures.append(client.set_parameters([Parameter("algorithm", value=pending.pop(0)[1])]))
             if t_now >= T_END:
