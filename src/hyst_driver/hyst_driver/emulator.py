@@ -63,6 +63,11 @@ class EmulatedDevice:
         self.gcs_error = 0
         #: Every voltage the host asked for, as received (V): what tests check against the driver limits.
         self.received: list[float] = []
+        #: The voltage the amplifier applied when each of those arrived (V), and the index into ``received`` at
+        #: each identify request (a (re)connection handshake): a reconnecting host re-seeds its slew limiter
+        #: from the applied voltage, so across a handshake the step is judged from there.
+        self.applied_at_receipt: list[float] = []
+        self.identified_at: list[int] = []
         self.bad_lines = 0
         self._tick_us = round(cfg.dt * 1e6)
 
@@ -88,6 +93,7 @@ class EmulatedDevice:
 
     def _set(self, volts: float) -> bool:
         self.received.append(volts)
+        self.applied_at_receipt.append(self.plant.u_applied)
         if not self.v_range[0] <= volts <= self.v_range[1]:
             return False
         self.v_set = volts
@@ -102,6 +108,7 @@ class EmulatedDevice:
         if isinstance(cmd, hdb.SetVoltage):
             return b"" if self._set(hdb.uv_to_volts(cmd.uv)) else hdb.encode_error(4)
         if isinstance(cmd, hdb.Identify):
+            self.identified_at.append(len(self.received))
             return hdb.encode_identity(self.IDENTITY)
         if isinstance(cmd, hdb.ReadPosition):
             return self._sample()
@@ -130,6 +137,7 @@ class EmulatedDevice:
             code, self.gcs_error = self.gcs_error, 0
             return gcs.encode_error_code(code)
         if isinstance(cmd, gcs.Idn):
+            self.identified_at.append(len(self.received))
             i = self.IDENTITY
             return gcs.encode_idn_reply(f"{i.vendor},GCS-EMU,{i.serial},{i.firmware}")
         return b""  # SVO 1 0: open loop is the only mode
