@@ -30,13 +30,18 @@ class TrainProblem:
     """
 
     def __init__(self, model: Model, t: np.ndarray, u: np.ndarray, y: np.ndarray, split: Split):
-        self.model = model
         self.t = t[:split.train_stop]
         self.u = u[:split.train_stop]
         self.y = y[split.train_start:split.train_stop]
         self.y_full = y[:split.train_stop]  # for starts that look at the data before the scored window
         self.a = split.train_start
         self.scale = float(np.std(self.y)) or 1.0
+        self._bind(model)
+
+    def _bind(self, model: Model) -> None:
+        """Everything that depends on the model: bounds, what it offers (Jacobian, normal equations, inactive
+        parameters), a fresh evaluation count."""
+        self.model = model
         self.n_eval = 0
         lo, hi = model.bounds
         self.lower, self.upper = lo.astype(np.float64), hi.astype(np.float64)
@@ -59,13 +64,7 @@ class TrainProblem:
         """The same record and windows for another model (e.g. the base of a composed model)."""
         p = TrainProblem.__new__(TrainProblem)
         p.__dict__.update(self.__dict__)
-        p.model = model
-        p.n_eval = 0
-        lo, hi = model.bounds
-        p.lower, p.upper = lo.astype(np.float64), hi.astype(np.float64)
-        p.has_jac = hasattr(model, "simulate_jac")
-        p.has_normal = hasattr(model, "normal_equations")
-        p.inactive = frozenset(getattr(model, "inactive", ()))
+        p._bind(model)
         return p
 
     def jac(self, theta: np.ndarray) -> np.ndarray:
