@@ -156,14 +156,6 @@ class Recorder:
         self.node.destroy_node()
 
 
-@pytest.fixture
-def ctx():
-    c = rclpy.Context()
-    rclpy.init(context=c)
-    yield c
-    rclpy.try_shutdown(context=c)
-
-
 def _rt_allowed() -> bool:
     """Whether this machine lets a process use SCHED_FIFO (root or CAP_SYS_NICE / an rtprio limit)."""
     code = "import os; os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))"

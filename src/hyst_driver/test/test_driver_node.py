@@ -19,14 +19,6 @@ pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
-def ctx():
-    c = rclpy.Context()
-    rclpy.init(context=c)
-    yield c
-    rclpy.try_shutdown(context=c)
-
-
-@pytest.fixture
 def emu():
     e = PtyEmulator(build_device("pea", 1000.0)).start()
     yield e

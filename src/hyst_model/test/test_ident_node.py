@@ -46,14 +46,6 @@ class FakeController(Node):
         return SetParametersResult(successful=True)
 
 
-@pytest.fixture
-def ctx():
-    c = Context()
-    rclpy.init(context=c)
-    yield c
-    rclpy.try_shutdown(context=c)
-
-
 def _spin_until(ex, cond, timeout=60.0):
     end = time.monotonic() + timeout
     while time.monotonic() < end and not cond():
