@@ -52,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: Path arguments every subcommand reads (attribute name → what it is), checked before any heavy import so a
 #: mistyped path is answered at once (it took 1.6 s idle and 8–12 s under load behind the numerical imports).
-_INPUT_PATHS = {"data": "no such file or bag", "params": "no such file", "input": "no such file"}
+_INPUT_PATHS = {"data": "no such file or bag", "params": "no such params file", "input": "no such file"}
 
 
 def _missing_input(args: argparse.Namespace) -> str | None:
