@@ -12,8 +12,9 @@ Modes
     A sampling thread takes one sample per period ``1/rate`` with the latest command, stamped with the node
     clock; the executor thread only handles commands and parameters. (A thread, not an rclpy timer: measured
     here, a SingleThreadedExecutor timer does not hold 1 kHz on a loaded 2-core machine and EventsExecutor
-    timers do not fire at all.) When it falls behind by more than a period it skips the missed samples and
-    counts them (``missed_periods`` on /diagnostics) instead of bursting. No command for ``command_timeout`` s
+    timers do not fire at all.) When it falls behind by more than a period it does not publish the missed
+    samples (no burst) but advances the plant over them at the held voltage, as a real stage keeps moving, and
+    counts them (``missed_periods`` on /diagnostics); ``hyst fit --gaps bridge`` spans such gaps exactly. No command for ``command_timeout`` s
     → the voltage ramps to ``v_safe`` at ``safe_ramp_rate`` V/s.
 ``lockstep`` (deterministic tests)
     Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has a
@@ -297,6 +298,7 @@ class SimNode(Node):
                 missed = int(-wait / dt)
                 self._count("late_ticks", missed)
                 due += missed * dt
+                self._hold(missed)
             try:
                 self._tick()
             except Exception as err:  # never let the sampler die silently  # noqa: BLE001
@@ -309,6 +311,24 @@ class SimNode(Node):
         if self._sampler is not None and self._sampler.is_alive():
             self._sampler.join(timeout=2.0)
         super().destroy_node()
+
+    def _hold(self, periods: int) -> None:
+        """Advance the plant over periods the sampler missed, at the applied voltage, without publishing.
+
+        A real stage keeps moving while its sampler is late and the DAC holds the last voltage; skipping the
+        plant steps instead would make the stage's own time stand still across the gap. A bag then shows a gap
+        over which the held input is exactly what the stage saw, so ``hyst fit --gaps bridge`` can span it.
+        Capped at 10 s of steps (a process stopped for longer has lost the experiment anyway).
+        """
+        with self._lock:
+            u = self._plant.u_applied
+            for _ in range(min(periods, int(10.0 * self._settings.rate))):
+                try:
+                    self._plant.step(u)
+                except SimError as err:
+                    self.get_logger().error(str(err), throttle_duration_sec=1.0)
+                    self._plant.reset()
+                    return
 
     def _tick(self) -> None:
         s = self._settings

@@ -25,8 +25,11 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--topic", default="/stage/state", help="state topic in a bag (default /stage/state)")
     p.add_argument("--columns", help="CSV columns for t,u,y, e.g. t_s,voltage_V,displacement_um (default t,u,y)")
     p.add_argument("--units", help="units of those columns, e.g. s,V,um (default: from the name suffix, else SI)")
-    p.add_argument("--gaps", choices=("error", "longest"), default="error",
-                   help="lost samples in the record: stop with an error (default) or keep the longest regular part")
+    p.add_argument("--gaps", choices=("auto", "bridge", "longest", "refuse", "error"), default="auto",
+                   help="irregular time stamps: auto (default) collapses repeated stamps (lockstep runs), bridges "
+                        "gaps of up to 10 missed periods (input held, as the DAC holds it) and keeps the longest "
+                        "regular segment between longer ones; bridge: the same but a longer gap is an error; "
+                        "longest: keep the longest regular segment; refuse (= error): stop on any irregularity")
     p.add_argument("--salvage", action="store_true",
                    help="read an MCAP bag whose recorder was killed (no footer) up to its damaged end")
     p.add_argument("--resample", type=float, metavar="HZ",
@@ -54,11 +57,11 @@ def load_checked(args) -> "Record":  # noqa: F821
                       salvage=getattr(args, "salvage", False))
     if rec.meta.get("salvaged"):
         print(f"hyst: note: {args.data} is damaged; salvaged {len(rec)} samples before the damage", file=sys.stderr)
-    if args.gaps == "longest":
-        rec = rec.longest_segment()
-        if rec.meta.get("dropped_samples"):
-            print(f"hyst: note: using samples {rec.meta['segment'][0]}–{rec.meta['segment'][1]} of {args.data} "
-                  f"(dropped {rec.meta['dropped_samples']})", file=sys.stderr)
+    from ..io.regular import regularise
+    rec, notes = regularise(rec, args.gaps)
+    for note in notes:
+        print(f"hyst: note: {args.data}: {note}", file=sys.stderr)
+    rec.meta["regularised"] = notes
     rec.check()
     if args.resample:
         if not args.resample > 0:
@@ -121,6 +124,8 @@ def run(args) -> int:
     if out is not None:
         prov = {"method": args.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": str(args.data),
                 "split": res.split, "seconds": round(res.seconds, 3), "samples": len(rec)}
+        if rec.meta.get("regularised"):
+            prov["data_notes"] = "; ".join(rec.meta["regularised"])
         if args.seed is not None:
             prov["seed"] = args.seed
         write_params(out, spec_from_model(model, res.theta, fit=prov, dt=rec.dt), force=args.force)
@@ -128,7 +133,8 @@ def run(args) -> int:
         obj = {"model": args.model, "effects": effects, "method": args.method, "rmse": res.rmse,
                "rmse_train": res.rmse_train, "seconds": res.seconds, "params": res.params,
                "n_evaluations": res.n_evaluations, "split": res.split, "samples": len(rec), "dt": rec.dt,
-               "data": str(args.data), "out": str(out) if out else None}
+               "data": str(args.data), "out": str(out) if out else None,
+               "data_notes": list(rec.meta.get("regularised", []))}
         print(json.dumps(obj))
     else:
         print(_table(res, rec, out))

@@ -99,14 +99,16 @@ class Record:
         if (d <= 0).any():
             k = int(np.flatnonzero(d <= 0)[0])
             raise DataError(f"{where}: time stamps not strictly increasing at row {k + 1} "
-                            f"(t={self.t[k]:.9g} then {self.t[k + 1]:.9g} s)")
+                            f"(t={self.t[k]:.9g} then {self.t[k + 1]:.9g} s); repeated stamps from a lockstep "
+                            "run are collapsed by --gaps auto")
         dt = float(np.median(d))
         gaps = np.flatnonzero(d > max_gap * dt)
         if gaps.size:
             k = int(gaps[0])
             raise DataError(f"{where}: {gaps.size} gap(s) in the time stamps (first after t={self.t[k]:.6f} s: "
                             f"{d[k] * 1e3:.3f} ms vs a {dt * 1e3:.3f} ms sample period); samples were lost — "
-                            "cut the record or use the longest regular segment (--gaps longest)")
+                            "--gaps auto bridges short gaps (input held) and keeps the longest regular segment "
+                            "between long ones; --gaps longest keeps only that segment")
         return self
 
     def jitter(self) -> float:
