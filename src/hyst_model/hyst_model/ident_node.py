@@ -68,11 +68,15 @@ class IdentConfig:
     overwrite: bool = False
     controller_node: str = ""
     push_timeout: float = 5.0
+    gaps: str = "auto"
 
     def validate(self) -> "IdentConfig":
         from .models import BASE_MODELS
         if self.model not in BASE_MODELS:
             raise ValueError(f"model must be one of {', '.join(sorted(BASE_MODELS))}")
+        from .io.regular import GAP_POLICIES
+        if self.gaps not in GAP_POLICIES:
+            raise ValueError(f"gaps must be one of {', '.join(GAP_POLICIES)}")
         if self.method not in _METHODS:
             raise ValueError(f"method must be one of {', '.join(_METHODS)}")
         if self.watch_dir and not Path(self.watch_dir).is_dir():
@@ -89,22 +93,28 @@ class IdentConfig:
 def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     """Fit ``cfg.model`` (+ effects) to one bag; returns ``(summary, model, result, dt)``. Pure: no ROS."""
     from .identify import fit
-    from .io import read_state_bag
+    from .io import read_state_bag, regularise
     from .models import data_config
     from .spec import build_model
-    rec = read_state_bag(path, cfg.topic).check()
+    # Lockstep bags repeat sample 0, realtime bags miss periods: made regular as `hyst fit --gaps` does.
+    rec, notes = regularise(read_state_bag(path, cfg.topic), cfg.gaps)
+    rec.check()
     config = dict(data_config(rec.u, rec.y), dt=rec.dt)
     model = build_model(cfg.model, cfg.effects, config)
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed,
               split=cfg.val_fraction if cfg.val_fraction > 0 else None)
     summary = {"bag": str(path), "model": cfg.model, "effects": list(cfg.effects), "method": cfg.method,
                "rmse": res.rmse, "rmse_train": res.rmse_train, "seconds": res.seconds, "samples": len(rec),
-               "params": res.params}
+               "params": res.params, "dt": rec.dt, "data_notes": notes}
     return summary, model, res, rec.dt
 
 
-def controller_parameters(model, theta) -> list[Parameter]:
-    """``model.*`` parameters the controller node declares (MBW only; BW is MBW with zero rate terms)."""
+def controller_parameters(model, theta, dt: float) -> list[Parameter]:
+    """``model.*`` parameters the controller node declares (MBW only; BW is MBW with zero rate terms).
+
+    Every one is pushed, ``model.dt`` and the scales included, so the controller can refuse a model identified
+    at another sample rate (the MBW recursion is per sample) instead of silently running it at its own rate.
+    """
     base = getattr(model, "base", model)
     if getattr(model, "effects", None):
         raise HystError("the controller takes a plain MBW/BW model, not base + effects")
@@ -116,6 +126,7 @@ def controller_parameters(model, theta) -> list[Parameter]:
     out = [Parameter("model.base", Parameter.Type.STRING, "mbw")]
     out += [Parameter(f"model.{k}", Parameter.Type.DOUBLE, float(values[k]))
             for k in PARAM_NAMES + ("offset", "u_scale", "y_scale")]
+    out.append(Parameter("model.dt", Parameter.Type.DOUBLE, float(dt)))
     return out
 
 
@@ -177,6 +188,9 @@ class IdentNode(Node):
             description="push model.* to this node after each fit, e.g. /hyst_controller ('' = off)"))
         d("push_timeout", 5.0, ParameterDescriptor(description="wait this long for the controller's parameter "
                                                                "service (s)", floating_point_range=_fp(0.1, 600)))
+        d("gaps", "auto", ParameterDescriptor(
+            description="irregular stamps in a bag: auto (collapse lockstep repeats, bridge up to 10 missed periods "
+                        "with the input held, else keep the longest segment) | bridge | longest | refuse"))
 
     def _read(self, changes: dict | None = None) -> IdentConfig:
         def get(name):
@@ -192,7 +206,7 @@ class IdentNode(Node):
             effects=tuple(get("effects") or ()), method=str(get("method")), seed=int(get("seed")),
             val_fraction=float(get("val_fraction")), params_file=str(get("params_file")),
             overwrite=bool(get("overwrite")), controller_node=str(get("controller_node")),
-            push_timeout=float(get("push_timeout")))
+            push_timeout=float(get("push_timeout")), gaps=str(get("gaps")))
 
     def _on_set(self, params) -> SetParametersResult:
         try:
@@ -279,13 +293,13 @@ class IdentNode(Node):
                 self.get_logger().error(f"not written: {err} (set overwrite:=true to replace it)")
                 summary["params_file_error"] = str(err)
         if cfg.controller_node:
-            self._push(model, res.theta, summary)
+            self._push(model, res.theta, dt, summary)
         self._publish(summary)
 
-    def _push(self, model, theta, summary: dict) -> None:
+    def _push(self, model, theta, dt: float, summary: dict) -> None:
         cfg = self._cfg
         try:
-            params = controller_parameters(model, theta)
+            params = controller_parameters(model, theta, dt)
         except HystError as err:
             self.get_logger().warning(f"not pushed: {err}")
             summary["push"] = f"skipped: {err}"
@@ -338,6 +352,7 @@ def main(args=None) -> None:
         return
     rclpy.init(args=args)
     node = None
+    code = 0
     try:
         node = IdentNode()
         rclpy.spin(node)
@@ -346,10 +361,13 @@ def main(args=None) -> None:
     except HystError as err:
         import sys
         print(f"hyst_ident_node: error: {err}", file=sys.stderr)
+        code = 2
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    if code:
+        raise SystemExit(code)
 
 
 if __name__ == "__main__":

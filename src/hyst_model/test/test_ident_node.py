@@ -35,7 +35,7 @@ class FakeController(Node):
     def __init__(self, context):
         super().__init__("fake_ctrl", context=context)
         self.declare_parameter("model.base", "mbw")
-        for k in KEYS:
+        for k in KEYS + ("dt",):
             self.declare_parameter(f"model.{k}", 0.0)
         self.add_on_set_parameters_callback(self._on_set)
 
@@ -73,6 +73,7 @@ def test_fits_bag_writes_params_and_pushes_to_controller(tmp_path, ctx):
             v = spec.values.get(k, spec.config.get(k))
             assert ctrl.get_parameter(f"model.{k}").value == pytest.approx(v, rel=1e-12, abs=1e-300)
         g = lambda k: ctrl.get_parameter(f"model.{k}").value  # noqa: E731
+        assert g("dt") == pytest.approx(5e-4, rel=1e-9)     # the rate the model was identified at is pushed too
         # the small-signal gain ζ1·y_scale/u_scale (m/V) is scale-free and must match the truth
         assert g("zeta1") * g("y_scale") / g("u_scale") == pytest.approx(TRUE.zeta1 * TRUE.y_scale / TRUE.u_scale,
                                                                          rel=0.01)
@@ -145,3 +146,33 @@ def test_params_file_loads_through_ros_params_file(tmp_path, ctx):
         n.destroy_node()
     finally:
         rclpy.try_shutdown(context=c)
+
+
+def test_lockstep_and_gappy_bags_are_fitted_as_they_are(tmp_path):
+    """Sample 0 repeated (lockstep) and two missed periods (realtime): fitted, with what was done reported."""
+    from hyst_model.ident_node import IdentConfig, fit_bag
+    rng = np.random.default_rng(3)
+    n = 2000
+    t = np.arange(n) * 5e-4
+    u = 75 + 50 * np.sin(2 * np.pi * 3 * t) + 15 * np.sin(2 * np.pi * 11 * t)
+    y = TRUE.simulate(u) + rng.normal(0, 2e-9, n)
+    idx = np.r_[0, 0, 0, np.arange(0, 900), np.arange(902, n)]
+    bag = write_state_bag(tmp_path / "lockstep", t[idx], u[idx], y[idx])
+    summary, _, res, dt = fit_bag(str(bag), IdentConfig())
+    assert summary["samples"] == n and dt == pytest.approx(5e-4)
+    assert any("collapsed 3" in s for s in summary["data_notes"])
+    assert any("bridged 1 gap" in s for s in summary["data_notes"])
+    assert res.rmse < 5e-9
+    from hyst_model.errors import DataError
+    with pytest.raises(DataError, match="--gaps auto"):
+        fit_bag(str(bag), IdentConfig(gaps="refuse"))
+
+
+def test_bad_start_parameter_is_one_line_and_exit_2(tmp_path):
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "hyst_model.ident_node", "--ros-args", "-p",
+                        f"watch_dir:={tmp_path / 'nope'}"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "watch_dir" in lines[0] and "Traceback" not in r.stderr, r.stderr
