@@ -18,13 +18,18 @@ emulator and the diagnosis tests all build on this API::
 Signal chain per sample ``k`` (see :mod:`hyst_sim.truth_effects` for each effect)::
 
     u_cmd ─ clip to [v_min, v_max] and slew_max·dt (NaN/inf hold the last value) ─▶ u_applied
-    u_applied ─ delay ─▶ MBW(u/u_scale) · y_scale + offset ─ asymmetry ─ creep ─ saturation ─ dynamics ─▶ x
+    u_applied ─ delay ─▶ MBW(u/u_scale) held within the end stops · y_scale + offset ─ asymmetry ─ creep ─ saturation ─ dynamics ─▶ x
     x ─ + drift ─ + noise ─ quantisation ─▶ y (what the sensor reports)
 
 With every effect off, ``y`` equals :meth:`hyst_model.core.MBWParams.simulate` of the applied voltage exactly
 (the plant calls :func:`hyst_model.core.mbw_step`; there is no second MBW implementation). The MBW parameters
 are per plant sample; ``mbw_substeps`` > 1 runs the recursion that many times per sample with the input held
 (a model identified at ``dt/mbw_substeps``, e.g. a 2 kHz fit driven by a 1 kHz sim).
+
+End stops: the stage's travel ends :data:`STOP_MARGIN` of the stroke beyond its rest positions at ``v_min``
+and ``v_max``. An input far from anything the model was identified on (e.g. 0/150 V alternating every sample)
+can drive the MBW state without bound; the stop holds it there and flags the sample (:data:`AT_STOP`), which
+the sim node reports as a fault on ``/diagnostics``.
 """
 from __future__ import annotations
 
@@ -42,7 +47,16 @@ from .errors import ConfigError, SimError
 from .profiles import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, clip_kernel, get_profile
 from .truth_effects import Effects, asymmetry_kernel, creep_kernel, dynamics_kernel, saturation_kernel
 
-__all__ = ["PlantConfig", "Plant", "StepResult", "RunResult", "CLIP_RANGE", "CLIP_SLEW", "CLIP_NONFINITE"]
+__all__ = ["PlantConfig", "Plant", "StepResult", "RunResult", "CLIP_RANGE", "CLIP_SLEW", "CLIP_NONFINITE", "AT_STOP",
+           "STOP_MARGIN"]
+
+#: Flag bit: the stage sat on a mechanical end stop during the sample (the model's hysteretic state was held
+#: there). Not a clip of the command: the input was legal, the stage's physics would have left its travel.
+AT_STOP = 8
+#: End stops sit this fraction of the nominal stroke beyond the rest positions at v_min and v_max. A real
+#: flexure stage's travel ends a little past its rated stroke; without a stop, an MBW model driven far outside
+#: the excitations it was identified on (0/150 V alternating each sample) diverges to kilometres.
+STOP_MARGIN = 0.25
 
 _NORMAL_BLOCK = 4096  # rows of pre-drawn N(0,1) pairs; the stream is the same however it is consumed
 
@@ -195,6 +209,7 @@ class StepResult(NamedTuple):
     y: float
     u_applied: float
     clipped: bool
+    at_stop: bool = False
 
 
 class RunResult(NamedTuple):
@@ -209,12 +224,16 @@ class RunResult(NamedTuple):
 
     @property
     def clipped(self) -> np.ndarray:
-        return self.flags != 0
+        return (self.flags & (CLIP_RANGE | CLIP_SLEW | CLIP_NONFINITE)) != 0
+
+    @property
+    def at_stop(self) -> np.ndarray:
+        return (self.flags & AT_STOP) != 0
 
 
 # Indices into the packed float settings (_F) and state (_S) arrays of the compiled loop.
 (F_US, F_YS, F_OFF, F_VMIN, F_VMAX, F_STEP, F_SUB, F_ASYM, F_XMID, F_HALF, F_CREEP, F_SAT, F_SATLO, F_SATHI,
- F_SATW, F_DYN, F_DR, F_DA, F_DW, F_DQ, F_NOISE, F_QUANT, F_DT, F_DELAY) = range(24)
+ F_SATW, F_DYN, F_DR, F_DA, F_DW, F_DQ, F_NOISE, F_QUANT, F_DT, F_DELAY, F_YSTOPLO, F_YSTOPHI) = range(26)
 (S_Y, S_UM, S_UA, S_T, S_DRIFT, S_DT_T, S_DIDX, S_XQ, S_X) = range(9)
 
 
@@ -238,6 +257,14 @@ def _plant_loop(u_cmd, p, f, st, creep_a, creep_c, phi, gam, dz, dbuf, normals, 
         for _ in range(n_sub):
             y = mbw_step(p, y, um, up)
             up = um
+        # The stage cannot leave its travel. A non-finite state is a numerical break, not physics: it is left
+        # to _advance, which raises SimError so the node resets instead of publishing a stop position.
+        if y < f[F_YSTOPLO] and math.isfinite(y):
+            y = f[F_YSTOPLO]
+            flags |= 8
+        elif y > f[F_YSTOPHI] and math.isfinite(y):
+            y = f[F_YSTOPHI]
+            flags |= 8
         st[S_Y] = y
         st[S_UM] = um
         x = f[F_YS] * y + f[F_OFF]
@@ -355,7 +382,9 @@ class Plant:
         self._u1[0] = u_cmd
         oy, ou, of, ox = self._out1
         self._advance(self._u1, oy, ou, of, ox)
-        return StepResult(float(oy[0]), float(ou[0]), bool(of[0]))
+        fl = int(of[0])
+        return StepResult(float(oy[0]), float(ou[0]), bool(fl & (CLIP_RANGE | CLIP_SLEW | CLIP_NONFINITE)),
+                          bool(fl & AT_STOP))
 
     def run(self, u_cmd) -> RunResult:
         """Apply a whole command record (V), continuing from the current state; equal to repeated :meth:`step`."""
@@ -390,7 +419,7 @@ class Plant:
         e = cfg.effects
         lo, hi = stroke
         span = hi - lo
-        f = np.zeros(24)
+        f = np.zeros(26)
         f[F_US], f[F_YS], f[F_OFF] = cfg.mbw.u_scale, cfg.mbw.y_scale, cfg.mbw.offset
         f[F_VMIN], f[F_VMAX], f[F_STEP] = cfg.v_min, cfg.v_max, cfg.slew_max * cfg.dt
         f[F_SUB], f[F_DT], f[F_DELAY] = cfg.mbw_substeps, cfg.dt, e.delay.strength
@@ -412,6 +441,9 @@ class Plant:
             f[F_DA] = d.sine * d.strength * d.period / (2.0 * math.pi)
             f[F_DQ] = d.walk * d.strength * math.sqrt(cfg.dt)
         f[F_NOISE], f[F_QUANT] = e.noise.strength, e.quantization.strength
+        # mechanical end stops, on the model's own scale (y_scale > 0 is checked by MBWParams)
+        f[F_YSTOPLO] = (lo - STOP_MARGIN * span - cfg.mbw.offset) / cfg.mbw.y_scale
+        f[F_YSTOPHI] = (hi + STOP_MARGIN * span - cfg.mbw.offset) / cfg.mbw.y_scale
         self._cfg, self._p, self._f, self._stroke = cfg, p, f, (float(lo), float(hi))
         self._creep_a, self._phi, self._gam = creep_a, phi, gam
         if initial:

@@ -131,7 +131,7 @@ class SimNode(Node):
         self._last_msg: JointState | None = None
         self._answered = False
         self._counts = dict.fromkeys(("samples", "clip_range", "clip_slew", "nonfinite", "bad_messages", "stale",
-                                      "timeouts", "late_ticks"), 0)
+                                      "timeouts", "late_ticks", "end_stop"), 0)
         self._period_counts = dict(self._counts)
         self._timed_out = False
         self._lock = threading.Lock()    # the plant is stepped by the sampler and reconfigured by the executor
@@ -275,6 +275,12 @@ class SimNode(Node):
             self.get_logger().warning(
                 f"command {v_cmd:.6g} V clipped to {r.u_applied:.6g} V (range [{s.v_min:g}, {s.v_max:g}] V, slew "
                 f"{s.slew_max:g} V/s)", throttle_duration_sec=1.0)
+        if r.at_stop:
+            self._count("end_stop")
+            self.get_logger().error(
+                f"the stage is on its end stop (y = {r.y:.6g} m, stroke {self._plant.stroke_range[0]:.3g}–"
+                f"{self._plant.stroke_range[1]:.3g} m): the input drives the model outside its travel",
+                throttle_duration_sec=1.0)
         msg = JointState()
         msg.header.stamp = stamp
         msg.header.frame_id = s.frame_id
@@ -383,8 +389,12 @@ class SimNode(Node):
             problems.append(f"{d['late_ticks']} missed periods")
         if d["bad_messages"]:
             problems.append(f"{d['bad_messages']} malformed commands")
+        if d["end_stop"]:
+            problems.insert(0, f"FAULT: stage on its end stop in {d['end_stop']} samples (the input drives the "
+                               "model outside its travel)")
         st = DiagnosticStatus()
-        st.level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
+        st.level = DiagnosticStatus.ERROR if d["end_stop"] else (
+            DiagnosticStatus.WARN if problems else DiagnosticStatus.OK)
         st.name = "hyst_sim: stage"
         st.hardware_id = f"sim:{s.profile}"
         st.message = "; ".join(problems) if problems else (
@@ -393,7 +403,8 @@ class SimNode(Node):
                 "samples": c["samples"], "v_applied": f"{self._plant.u_applied:.6g}",
                 "clipped_range": c["clip_range"], "clipped_slew": c["clip_slew"],
                 "nonfinite_commands": c["nonfinite"], "malformed_commands": c["bad_messages"],
-                "stale_commands": c["stale"], "timeouts": c["timeouts"], "missed_periods": c["late_ticks"]}
+                "stale_commands": c["stale"], "timeouts": c["timeouts"], "missed_periods": c["late_ticks"],
+                "end_stop_samples": c["end_stop"]}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()

@@ -181,7 +181,7 @@ def test_clipping_never_leaves_the_profile_and_flags_every_change(cmds, profile)
 
 def test_clip_flags_name_the_reason():
     plant = Plant(BASE.replace(slew_max=1000.0))                   # 1 V per sample
-    assert plant.step(0.5)[1:] == (0.5, False)
+    assert plant.step(0.5)[1:3] == (0.5, False)
     r = plant.step(100.0)
     assert r.u_applied == 1.5 and r.clipped
     out = plant.run([-5.0, np.nan, 1.2, 3.0])
@@ -225,3 +225,32 @@ def test_a_diverging_state_raises_instead_of_publishing_nan():
     plant._st[0] = np.inf  # simulate a numerically broken state
     with pytest.raises(SimError, match="diverged"):
         plant.step(10.0)
+
+
+@pytest.mark.parametrize("profile", ["pea", "gma"])
+def test_alternating_full_range_input_stays_on_the_end_stops_and_is_flagged(profile):
+    """0/150 V alternating every sample drove the unbounded stage to −0.4 mm in 10 samples and −724 m in 80."""
+    from hyst_sim.plant import STOP_MARGIN, PlantConfig
+    cfg = PlantConfig.for_profile(profile, 2000.0, seed=0).replace(slew_max=1e9)
+    plant = Plant(cfg)
+    plant.reset()
+    lo, hi = plant.stroke_range
+    span = hi - lo
+    r = plant.run(np.tile([cfg.v_min, cfg.v_max], 2000))
+    assert np.all(np.isfinite(r.y))
+    quant = 1e-8
+    assert r.y.min() >= lo - STOP_MARGIN * span - quant and r.y.max() <= hi + STOP_MARGIN * span + quant
+    assert r.at_stop.sum() > 100 and not r.clipped.any()        # a legal input: a stop, not a clip
+    # the stage recovers: a slow sine afterwards is within the stroke and never on a stop
+    t = np.arange(4000) / 2000.0
+    r2 = plant.run(cfg.v_min + (cfg.v_max - cfg.v_min) * (0.5 + 0.5 * np.sin(2 * np.pi * 2 * t)))
+    assert not r2.at_stop[2000:].any()
+
+
+def test_ordinary_excitations_never_touch_the_stops():
+    plant = Plant.default(rate=2000.0, seed=1)
+    plant.reset()
+    t = np.arange(40000) / 2000.0
+    for f_hz in (1.0, 10.0, 100.0):
+        r = plant.run(75.0 + 75.0 * np.sin(2 * np.pi * f_hz * t))
+        assert not r.at_stop.any()

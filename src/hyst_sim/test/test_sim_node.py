@@ -223,3 +223,17 @@ def test_console_script_exits_cleanly_on_sigterm_and_refuses_bad_parameters():
     assert len(got) >= 50 and got[-1].name == ["stage"]
     assert proc.returncode == 0
 
+
+
+def test_end_stop_is_a_fault_on_diagnostics_not_a_number(rig_factory):
+    rig = rig_factory(mode="lockstep", slew_max=1e7, rate=2000.0)
+    assert rig.spin_until(lambda: len(rig.states) >= 1), "no initial state in lockstep"
+    for k in range(80):
+        last = rig.states[-1]
+        rig.send(150.0 if k % 2 == 0 else 0.0, last.header.stamp)
+        assert rig.spin_until(lambda: rig.states[-1].header.stamp != last.header.stamp), f"no state for {k}"
+    y = np.array([m.position[0] for m in rig.states])
+    assert np.all(np.isfinite(y)) and y.min() > -20e-6 and y.max() < 50e-6
+    assert rig.node.counts["end_stop"] > 0
+    assert rig.spin_until(lambda: any(s.level == b"\x02" and "end stop" in s.message
+                                      for d in rig.diags for s in d.status), 5.0)
