@@ -121,6 +121,11 @@ def run(args) -> int:
         options["iterations"] = args.iterations
     res = fit(model, rec.t, rec.u, rec.y, method=args.method, seed=args.seed, split=split,
               progress=not args.quiet, **options)
+    from ..identify.admissible import check_admissible
+    adm = check_admissible(model, res.theta)
+    if not adm.clean and not args.json:
+        for line in adm.violations + [f"{b}" for b in adm.at_bounds]:
+            print(f"hyst fit: warning: {line}", file=sys.stderr)
     if out is not None:
         prov = {"method": args.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": str(args.data),
                 "split": res.split, "seconds": round(res.seconds, 3), "samples": len(rec)}
@@ -128,25 +133,29 @@ def run(args) -> int:
             prov["data_notes"] = "; ".join(rec.meta["regularised"])
         if args.seed is not None:
             prov["seed"] = args.seed
+        prov["controllers"] = adm.controllers
         write_params(out, spec_from_model(model, res.theta, fit=prov, dt=rec.dt), force=args.force)
     if args.json:
         obj = {"model": args.model, "effects": effects, "method": args.method, "rmse": res.rmse,
                "rmse_train": res.rmse_train, "seconds": res.seconds, "params": res.params,
                "n_evaluations": res.n_evaluations, "split": res.split, "samples": len(rec), "dt": rec.dt,
                "data": str(args.data), "out": str(out) if out else None,
-               "data_notes": list(rec.meta.get("regularised", []))}
+               "data_notes": list(rec.meta.get("regularised", [])), "admissibility": adm.to_json()}
         print(json.dumps(obj))
     else:
-        print(_table(res, rec, out))
+        print(_table(res, rec, out, adm))
     return 0
 
 
-def _table(res, rec, out) -> str:
+def _table(res, rec, out, adm) -> str:
     lines = [f"model {res.model}  method {res.method}  {len(rec)} samples at {1.0 / rec.dt:.6g} Hz  "
              f"{res.seconds:.2f} s  {res.n_evaluations} evaluations",
              f"RMSE validation {res.rmse * 1e9:.2f} nm   training {res.rmse_train * 1e9:.2f} nm",
              f"split: {res.split}", "", f"{'parameter':<16}{'value':>16}"]
     lines += [f"{k:<16}{v:>16.8g}" for k, v in res.params.items()]
+    lines += ["", f"controllers: {adm.controllers}"]
+    lines += [f"  Remark 4.1 violated: {v}" for v in adm.violations]
+    lines += [f"  {b}" for b in adm.at_bounds]
     if out:
         lines += ["", f"wrote {out}"]
     return "\n".join(lines)
