@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -403,8 +404,9 @@ def main(args=None) -> int:
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ControlError, ValueError) as err:
-        print(f"hyst_controller_node: {err}", file=sys.stderr)
+    except (ControlError, ValueError, ParameterException) as err:
+        # a bad start-up parameter (out of its declared range, wrong type, rejected): one line, exit 2
+        print(f"hyst_controller_node: error: {err}", file=sys.stderr)
         return 2
     finally:
         if node is not None:

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -298,8 +298,8 @@ def main(args=None) -> int:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (HystError, ValueError) as err:
-        print(f"hyst_residual_node: {err}", file=sys.stderr)
+    except (HystError, ValueError, ParameterException) as err:  # bad start-up parameters: one line, exit 2
+        print(f"hyst_residual_node: error: {err}", file=sys.stderr)
         return 2
     finally:
         if node is not None:

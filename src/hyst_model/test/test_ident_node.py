@@ -167,12 +167,3 @@ def test_lockstep_and_gappy_bags_are_fitted_as_they_are(tmp_path):
     with pytest.raises(DataError, match="--gaps auto"):
         fit_bag(str(bag), IdentConfig(gaps="refuse"))
 
-
-def test_bad_start_parameter_is_one_line_and_exit_2(tmp_path):
-    import subprocess
-    import sys
-    r = subprocess.run([sys.executable, "-m", "hyst_model.ident_node", "--ros-args", "-p",
-                        f"watch_dir:={tmp_path / 'nope'}"], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 2, r
-    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and "watch_dir" in lines[0] and "Traceback" not in r.stderr, r.stderr
