@@ -23,7 +23,6 @@ directory) and never replace an existing file unless ``force=True``; without ``f
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .modes import mkstemp_user
 from ..errors import HystError, ParamsError
 from ..model import Model
 
@@ -156,7 +156,7 @@ def write_params(path: str | Path, spec: ParamsSpec, *, force: bool = False, nod
     if not parent.is_dir():
         raise ParamsError(f"{parent}: no such directory")
     text = to_yaml(spec, node)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
+    fd, tmp = mkstemp_user(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
