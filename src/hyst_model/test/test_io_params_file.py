@@ -77,3 +77,23 @@ def test_bad_files(tmp_path, text, err, match):
 def test_flatten_nest_inverse():
     d = {"zeta1": 1.0, "creep": {"gain": 2.0, "tau": {"a": 3.0}}}
     assert nest(flatten(d)) == d and flatten(d)["creep.tau.a"] == 3.0
+
+
+def test_garbage_missing_scales_and_bad_dt_are_one_clear_error(tmp_path):
+    from hyst_model.errors import ParamsError
+    from hyst_model.io import read_params
+    bad = tmp_path / "garbage.bin"
+    bad.write_bytes(bytes(range(256)) * 4)
+    with pytest.raises(ParamsError, match="cannot read params file"):
+        read_params(bad)
+    from hyst_model.core import pea_default
+    vals = "".join(f"      {k}: {v!r}\n" for k, v in pea_default().to_dict().items()
+                   if k not in ("u_scale", "y_scale", "offset"))
+    base = "/**:\n  ros__parameters:\n    model:\n      base: mbw\n      offset: 0.0\n" + vals
+    p = tmp_path / "noscale.yaml"
+    p.write_text(base + "      y_scale: 5.0e-06\n")
+    with pytest.raises(ParamsError, match="model.u_scale missing"):
+        read_params(p)
+    p.write_text(base + "      u_scale: 15.0\n      y_scale: 5.0e-06\n      dt: 0\n")
+    with pytest.raises(ParamsError, match="model.dt must be a positive number"):
+        read_params(p)

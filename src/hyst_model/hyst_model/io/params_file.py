@@ -192,8 +192,8 @@ def read_params(path: str | Path) -> ParamsSpec:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ParamsError(f"{path}: no such params file") from None
-    except (OSError, yaml.YAMLError) as err:
-        raise ParamsError(f"{path}: cannot read params file ({err})") from err
+    except (OSError, yaml.YAMLError, UnicodeDecodeError, RecursionError) as err:  # binary, garbage, unreadable
+        raise ParamsError(f"{path}: cannot read params file ({type(err).__name__}: {str(err)[:200]})") from err
     if not isinstance(doc, Mapping):
         raise ParamsError(f"{path}: not a ROS 2 parameters file (expected '/**: ros__parameters: model: ...')")
     section = None
@@ -231,4 +231,13 @@ def read_params(path: str | Path) -> ParamsSpec:
     if bad:
         raise ParamsError(f"{path}: non-finite value for {', '.join(bad)}")
     spec.theta(m)  # every parameter present
+    # A missing scale silently became 1.0 (a −6 cm output); a non-positive dt breaks every per-sample model.
+    needed = [k for k in ("u_scale", "y_scale") if k in m.config() and k not in spec.config]
+    if needed:
+        raise ParamsError(f"{path}: model.{' and model.'.join(needed)} missing (V per model unit, m per model unit); "
+                          "a params file written by 'hyst fit' has them")
+    for k in ("u_scale", "y_scale", "dt"):
+        v = spec.config.get(k)
+        if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+            raise ParamsError(f"{path}: model.{k} must be a positive number, got {v!r}")
     return spec
