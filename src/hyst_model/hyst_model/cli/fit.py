@@ -89,6 +89,8 @@ def register(subparsers) -> None:
     p.add_argument("--out", help="write the params file here (ROS 2 parameters YAML)")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
+                   help="Python file defining extra Effect classes for --effects (repeatable)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_data_options(p)
     p.set_defaults(func=run)
@@ -108,6 +110,9 @@ def run(args) -> int:
             raise ParamsError(f"{out.parent}: no such directory")
     if args.model not in BASE_MODELS:
         raise ParamsError(f"unknown model {args.model!r}; choose one of {', '.join(sorted(BASE_MODELS))}")
+    from ..effects import load_effect_module
+    for path in args.effect_module:
+        load_effect_module(path)
     effects = [e.strip() for e in args.effects.split(",") if e.strip()]
     split = parse_split(args.train, args.val_fraction)
     rec = load_checked(args)
