@@ -455,7 +455,13 @@ def main(args=None) -> int:
         node = SimNode()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        executor.spin()
+        try:
+            executor.spin()
+        except RuntimeError:
+            # a signal that shuts the context down inside a wait can surface as a bare RuntimeError (as in the
+            # controller node): a normal stop; anything while the context is still up is not
+            if rclpy.ok():
+                raise
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (SimError, ParameterException) as err:  # bad start-up parameters: one line, no traceback

@@ -213,7 +213,7 @@ def test_console_script_exits_cleanly_on_sigterm_and_refuses_bad_parameters():
         while len(got) < 50 and time.monotonic() < end:
             ex.spin_once(timeout_sec=0.05)
         proc.send_signal(signal.SIGTERM)
-        proc.communicate(timeout=10)               # a hang here was a real bug (EventsExecutor ignores SIGTERM)
+        _, err = proc.communicate(timeout=10)      # a hang here was a real bug (EventsExecutor ignores SIGTERM)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -221,7 +221,7 @@ def test_console_script_exits_cleanly_on_sigterm_and_refuses_bad_parameters():
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
     assert len(got) >= 50 and got[-1].name == ["stage"]
-    assert proc.returncode == 0
+    assert proc.returncode == 0, err.decode(errors="replace")[-3000:]
 
 
 
