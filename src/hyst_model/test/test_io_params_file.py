@@ -54,7 +54,7 @@ def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
     def boom(*a, **k):
         raise OSError("disk full")
     monkeypatch.setattr(os, "replace", boom)
-    with pytest.raises(OSError):
+    with pytest.raises(ParamsError, match="disk full"):
         write_params(p, spec, force=True)
     assert p.read_text() == "precious\n" and sorted(os.listdir(tmp_path)) == ["p.yaml"]
 
@@ -97,3 +97,41 @@ def test_garbage_missing_scales_and_bad_dt_are_one_clear_error(tmp_path):
     p.write_text(base + "      u_scale: 15.0\n      y_scale: 5.0e-06\n      dt: 0\n")
     with pytest.raises(ParamsError, match="model.dt must be a positive number"):
         read_params(p)
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_written_with_the_user_umask_also_after_force(tmp_path, force):
+    _, _, spec = _spec()
+    p = tmp_path / "p.yaml"
+    if force:
+        p.write_text("old\n")
+        p.chmod(0o644)
+    old = os.umask(0o022)
+    try:
+        write_params(p, spec, force=force)
+    finally:
+        os.umask(old)
+    assert (p.stat().st_mode & 0o777) == 0o644
+
+
+@pytest.mark.parametrize("target,match", [
+    ("/proc/self/nope.yaml", "special file system"),
+    ("{tmp}/missing/p.yaml", "does not exist"),
+    ("{tmp}", "is a directory"),
+])
+def test_unwritable_targets_refused_before_work(tmp_path, target, match):
+    _, _, spec = _spec()
+    with pytest.raises(ParamsError, match=match):
+        write_params(target.format(tmp=tmp_path), spec, force=True)
+
+
+def test_diagnose_refuses_an_existing_out_before_any_work(tmp_path, capsys):
+    """`hyst diagnose DATA --out P` with P present: refused at once (it used to be after minutes of fitting)."""
+    from hyst_model.cli.main import main
+    from hyst_model.io import write_csv
+    t = np.arange(2000) * 5e-4
+    write_csv(tmp_path / "r.csv", {"t": t, "u": 75 + 60 * np.sin(t), "y": 1e-6 * np.sin(t)})
+    (tmp_path / "p.yaml").write_text("keep me\n")
+    assert main(["diagnose", str(tmp_path / "r.csv"), "--out", str(tmp_path / "p.yaml"), "--quiet"]) == 2
+    assert "exists; use --force" in capsys.readouterr().err
+    assert (tmp_path / "p.yaml").read_text() == "keep me\n"

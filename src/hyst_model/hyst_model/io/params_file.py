@@ -147,16 +147,14 @@ def write_params(path: str | Path, spec: ParamsSpec, *, force: bool = False, nod
     ParamsError
         ``path`` exists and ``force`` is false, or its directory does not exist.
     """
-    path = Path(path)
-    if path.exists() and not force:
-        raise ParamsError(f"{path} exists; use --force to overwrite it")
-    if path.is_dir():
-        raise ParamsError(f"{path} is a directory")
+    from .outputs import check_output
+    path = check_output(path, force=force, what="params file")
     parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise ParamsError(f"{parent}: no such directory")
     text = to_yaml(spec, node)
-    fd, tmp = mkstemp_user(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
+    try:
+        fd, tmp = mkstemp_user(prefix=f".{path.name}.", suffix=".tmp", dir=parent)  # the user's umask, not 0600
+    except OSError as err:
+        raise ParamsError(f"cannot write {path}: {err.strerror or err}") from err
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
@@ -170,6 +168,8 @@ def write_params(path: str | Path, spec: ParamsSpec, *, force: bool = False, nod
             except FileExistsError:
                 raise ParamsError(f"{path} exists; use --force to overwrite it") from None
             os.unlink(tmp)
+    except OSError as err:
+        raise ParamsError(f"cannot write {path}: {err.strerror or err}") from err
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
