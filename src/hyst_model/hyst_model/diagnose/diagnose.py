@@ -414,8 +414,10 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
 
     def screen_on(inner: Model, th_inner: np.ndarray, chosen: list[str], nm: str, prior: dict | None):
         """Fit only effect ``nm`` (+ offset) on top of a fixed inner model; return (val RMSE, effect values)."""
-        if compose(base_model, [nm], cfg).effects[-1].kind == "base":
-            # replaces the base recursion (configuration may decide it): only a full refit can tell
+        if compose(base_model, [nm], cfg).effects[-1].screen_with_refit():
+            # replaces the base recursion (configuration may decide it), or transforms its input: a base fitted
+            # without the effect imitates it (its δ terms mimic a delay), so with the base held fixed the effect
+            # looks useless — only a refit with the base on the transformed input can tell
             m, th, yh = refit(base_model, chosen + [nm], cfg, t, u, y, th_base, prior, fit_)
             return _rmse((y - yh)[val]), _effect_values(m, th, nm), (m, th, y - yh)
         fx = Fixed(inner, th_inner)
