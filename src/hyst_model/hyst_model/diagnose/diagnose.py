@@ -2,8 +2,9 @@
 
 The engine (:func:`diagnose`)
 
-1. checks the record and splits it like ``hyst fit`` does (:func:`hyst_model.identify.make_split`, default: train
-   on the first 75 %, validate on the last 25 %). Models are simulated free-run from rest over the whole record;
+1. checks the record and splits it like ``hyst fit`` does by default (:func:`validation_mask`: train on 75 %,
+   validate on 25 % of the samples in 8 interleaved blocks). Models are simulated free-run from rest over the
+   whole record;
    their parameters only ever see the training samples, so a free parameter earns nothing unless it predicts
    held-out data — and the validation RMSE at each ladder rung is the number ``hyst fit --effects`` reports;
 2. estimates the sensor noise floor from the measured output (second differences, robust) — the best any model

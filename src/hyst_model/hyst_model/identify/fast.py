@@ -276,7 +276,12 @@ class FastFit(Estimator):
         th_data = self._data_start(problem, model, base, best[0])
         c_def, c_data = problem.cost(th_default), problem.cost(th_data)
         self._say(f"fast: effects at their defaults -> {c_def:.4g} m, at their data-driven start -> {c_data:.4g} m")
-        return [th_data if c_data < c_def else th_default]
+        # Both are run (briefly, the better one then continued): at their defaults most effects are the identity,
+        # where an effect that is inactive there (a saturation above the stroke) has no gradient and the fit
+        # stays put, while a data-driven start can cost more at first and still lead to the noise floor
+        # (hidden saturation bag: 4.0 µm at its start vs 0.25 µm at the defaults, 2.1 nm vs 460 nm fitted).
+        pair = [th_data, th_default] if c_data < c_def else [th_default, th_data]
+        return pair if not np.allclose(th_data, th_default) else pair[:1]
 
     def _fit_base(self, bp: TrainProblem, base: MBWModel) -> tuple[np.ndarray, float] | None:
         best = None
