@@ -352,7 +352,8 @@ def _effect_values(m: Model, th: np.ndarray, only: str | None = None) -> dict:
 def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None, fitter=None,
              min_factor: float = 1.1, t_min: float = 3.0, noise_margin: float = 1.25,
              unexplained_factor: float = UNEXPLAINED_FACTOR,
-             full_rate_top: int = 2, max_rungs: int = 3, progress: bool | Callable = False) -> Diagnosis:
+             full_rate_top: int = 2, max_rungs: int = 3, progress: bool | Callable = False,
+             config: dict | None = None) -> Diagnosis:
     """Fit ``base``, test each effect by its residual signature and a validated refit, name the missing one.
 
     Parameters
@@ -381,6 +382,10 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         Effects in the ladder at most.
     progress : bool or callable
         Print progress lines on stderr (or pass each line to a callable).
+    config : dict, optional
+        Effect configuration the user fixes (``{"dynamics.interp": "fft", "dynamics.structure": "feedback"}``):
+        it overrides the data-derived settings, and an effect's variants that would change a fixed key are not
+        tried.
 
     Raises
     ------
@@ -408,6 +413,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     dt = sample_time(t)
     cfg = dict(_scales(u, y), dt=dt)
     cfg["drift.span"] = float(t[train][-1] - t[0])  # drift knots cover the span the fit scores
+    fixed = dict(config or {})
+    cfg.update(fixed)
     base_model = build_model(base, (), cfg)
     names = candidate_names(base_model, effects)
     n_steps = 1 + 2 * len(names) + full_rate_top * max_rungs
@@ -461,6 +468,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         except Exception as err:  # noqa: BLE001 - a user effect's test must not sink the diagnosis
             score, ev = 0.0, f"its residual test failed ({type(err).__name__}: {err})"
         variants = list(getattr(EFFECTS[nm], "variants", lambda: [{}])()) or [{}]
+        variants = [v for v in variants if not any(k in fixed and fixed[k] != x for k, x in v.items())] or [{}]
         tried: list[tuple[float, dict, dict, tuple | None]] = []
         errors = []
         for var in variants:  # e.g. dynamics in both structures: keep whichever validates better
