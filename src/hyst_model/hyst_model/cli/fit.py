@@ -153,10 +153,13 @@ def run(args) -> int:
         split = block_mask(len(rec), float(split[1]), BLOCKS)  # the same hold-out as hyst diagnose
     config = data_config(rec.u, rec.y)
     config["dt"] = rec.dt
-    if not isinstance(split, tuple):
-        # drift knots cover the span the fit scores, as in hyst diagnose
-        train = ~split if isinstance(split, np.ndarray) else np.arange(len(rec)) < round(len(rec) * (1 - split))
-        config["drift.span"] = float(rec.t[train][-1] - rec.t[0])
+    if args.model in ("mbw", "bw"):
+        # each effect's own settings from the scored samples, as hyst diagnose does (e.g. the drift knots' span)
+        from ..effects import effects_data_config
+        from ..identify.result import make_split
+        scored = np.zeros(len(rec), dtype=bool)
+        scored[make_split(rec.t, split).train_index()] = True
+        config.update(effects_data_config(effects, rec.t, rec.u, rec.y, scored))
     config.update(user_cfg)
     try:
         model = build_model(args.model, effects, config)

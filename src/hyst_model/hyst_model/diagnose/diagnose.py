@@ -35,7 +35,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import DataError, EffectError, FitError
-from ..effects import EFFECTS, compose
+from ..effects import EFFECTS, compose, effects_data_config
 from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len, noise_floor, sample_time
 from ..model import Model
@@ -412,11 +412,12 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     fit_ = fitter or default_fitter
     dt = sample_time(t)
     cfg = dict(_scales(u, y), dt=dt)
-    cfg["drift.span"] = float(t[train][-1] - t[0])  # drift knots cover the span the fit scores
     fixed = dict(config or {})
     cfg.update(fixed)
     base_model = build_model(base, (), cfg)
     names = candidate_names(base_model, effects)
+    cfg.update(effects_data_config(names, t, u, y, train))  # each effect's own settings from the data
+    cfg.update(fixed)
     n_steps = 1 + 2 * len(names) + full_rate_top * max_rungs
     say = progress if callable(progress) else _Progress(bool(progress), n_steps)
     noise = noise_floor(y)
