@@ -40,15 +40,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--force", action="store_true",
                    help="write the report into DIR even if it holds files hyst did not write")
     p.add_argument("--json", action="store_true", help="print one JSON object with the figures")
-    p.add_argument("--topic", default="/stage/state", help="state topic in a bag (default /stage/state)")
-    p.add_argument("--columns", metavar="T,U,Y", help="CSV column names of time, input, output")
-    p.add_argument("--units", metavar="T,U,Y", help="CSV units of those columns, e.g. s,V,um")
     p.add_argument("--window", metavar="T0:T1",
                    help="score only samples with T0 <= t < T1 (s); the model still runs over the whole record")
     p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
                    help="Python file with user effects the params file uses (repeatable)")
     p.add_argument("--levels", type=int, default=5, help="number of input-level bins (default 5)")
     p.add_argument("--lags", type=int, default=25, help="lags of the correlation tests (default 25)")
+    from .fit import add_data_options
+    add_data_options(p)  # --topic, --columns, --units, --gaps, --salvage, --resample: as fit and diagnose
     p.set_defaults(func=run)
 
 
@@ -151,14 +150,14 @@ def summary_text(st, title: str = "") -> str:
 
 def _load(args) -> tuple[Any, Any, Any, np.ndarray]:
     from ..effects import load_effect_module
-    from ..io import load_record, read_params
+    from ..io import read_params
     for m in args.effect_module:
         load_effect_module(m)
     spec = read_params(args.params)
     model = spec.model()
     theta = spec.theta(model)
-    rec = load_record(args.data, topic=args.topic, columns=args.columns, units=args.units)
-    rec.check()
+    from .fit import load_checked
+    rec = load_checked(args)
     return spec, rec, model, theta
 
 

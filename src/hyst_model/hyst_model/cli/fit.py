@@ -86,6 +86,10 @@ def load_checked(args) -> "Record":  # noqa: F821
         print(f"hyst: note: {args.data}: {note}", file=sys.stderr)
     rec.meta["regularised"] = notes
     rec.check()
+    from ..io.plausible import plausibility
+    units = rec.meta.get("units") or ("s", "V", "m")
+    for warning in plausibility(rec.t, rec.u, rec.y, input_unit=str(units[1])):
+        print(f"hyst: warning: {args.data}: {warning}", file=sys.stderr)
     if args.resample:
         if not args.resample > 0:
             raise DataError("--resample must be positive")

@@ -1,0 +1,55 @@
+"""Plausibility of a record for a smart-material stage: catch unit mistakes before a "successful" nonsense fit.
+
+A displacement in µm read as metres fits without complaint (a 4 041 482 nm RMSE); times in ms read as seconds
+give a 2 Hz record. Nothing here refuses data — the rig may be unusual — but each implausible figure is named
+with the likely cause and the option that fixes it, on stderr, before the fit.
+
+The limits are the rig's two stages (the same figures as ``hyst_sim.profiles``, which the driver and the sim
+share; this package sits below them, so they are restated here): PEA 0…150 V, 30 µm; GMA ±5 V, ±20 µm.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["plausibility", "STROKE_MAX", "V_RANGE", "RATE_RANGE", "STROKE_FACTOR"]
+
+#: Largest stroke of the rig's stages (m): GMA ±20 µm.
+STROKE_MAX = 40e-6
+#: Displacement spans beyond this many strokes are flagged (µm as m is 10⁶, mm as m 10³).
+STROKE_FACTOR = 100.0
+#: Widest amplifier range of the rig's stages (V): GMA −5 V … PEA 150 V.
+V_RANGE = (-5.0, 150.0)
+#: Plausible sample rates (Hz) for a positioning record.
+RATE_RANGE = (10.0, 100e3)
+
+
+def plausibility(t: np.ndarray, u: np.ndarray, y: np.ndarray, input_unit: str = "V") -> list[str]:
+    """Warnings (sentences) for figures no smart-material stage record has; empty when plausible.
+
+    Parameters
+    ----------
+    t, u, y : ndarray
+        The record in SI units (s, V, m), as read.
+    input_unit : str
+        The unit the input column was given in; the voltage range is only checked for volts.
+    """
+    out: list[str] = []
+    t, u, y = (np.asarray(a, dtype=np.float64) for a in (t, u, y))
+    if t.size > 1:
+        d = np.diff(t)
+        d = d[d > 0]
+        if d.size:
+            fs = 1.0 / float(np.median(d))
+            if not RATE_RANGE[0] <= fs <= RATE_RANGE[1]:
+                out.append(f"the sample rate is {fs:.4g} Hz, outside {RATE_RANGE[0]:g} Hz – {RATE_RANGE[1] / 1e3:g} kHz: "
+                           "are the times in ms or µs read as seconds? give the unit, e.g. --units ms,V,um")
+    span = float(np.ptp(y)) if y.size else 0.0
+    if span > STROKE_FACTOR * STROKE_MAX:
+        out.append(f"the displacement spans {span:.4g} m, {span / STROKE_MAX:.3g}× the largest stage stroke "
+                   f"({STROKE_MAX * 1e6:g} µm): is it in µm or nm read as metres? give the unit, e.g. --units s,V,um")
+    if input_unit in ("V", "v") and u.size:
+        lo, hi = float(np.min(u)), float(np.max(u))
+        if lo < 1.1 * V_RANGE[0] - 1.0 or hi > 1.1 * V_RANGE[1]:
+            out.append(f"the input reaches {lo:.4g} … {hi:.4g} V, beyond both amplifiers (PEA 0 … 150 V, GMA ±5 V): "
+                       "is it in mV read as volts, or not the amplifier's input? give the unit, e.g. --units s,mV,um")
+    return out
