@@ -5,6 +5,7 @@ Usage: ``python bench/run_all.py [NAME ...]`` — NAME filters by substring of t
 from __future__ import annotations
 
 import importlib.util
+import os
 import sys
 import time
 from pathlib import Path
@@ -23,7 +24,10 @@ def main(argv: list[str]) -> int:
         spec = importlib.util.spec_from_file_location(f.stem, f)
         mod = importlib.util.module_from_spec(spec)
         t0 = time.perf_counter()
-        print(f"\n## {f.stem}\n", flush=True)
+        load = os.getloadavg()[0]
+        cores = os.cpu_count() or 1
+        note = f" — load {load:.1f} > {cores} cores: timings not representative" if load > cores else ""
+        print(f"\n## {f.stem} (load average {load:.1f}{note})\n", flush=True)
         try:
             spec.loader.exec_module(mod)
             print(mod.main())

@@ -8,7 +8,18 @@ from .blas import single_thread_blas
 # Before anything loads numpy (and with it BLAS): hyst's own processes use one BLAS thread (see .blas).
 single_thread_blas()
 
-from .core import MBWParams, mbw_simulate, mbw_step, pea_default  # noqa: E402  (after the BLAS setting on purpose)
-from .model import MBWModel, Model, Param  # noqa: E402
+# Lazy (PEP 562): ``hyst --help`` and an immediate argument error must not pay for numpy/numba (0.35 s of
+# imports, several seconds on a loaded machine); the names load on first use.
+_LAZY = {"MBWParams": "core", "mbw_simulate": "core", "mbw_step": "core", "pea_default": "core",
+         "Model": "model", "MBWModel": "model", "Param": "model"}
 
-__all__ = ["single_thread_blas", "MBWParams", "mbw_simulate", "mbw_step", "pea_default", "Model", "MBWModel", "Param"]
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = ["single_thread_blas", "MBWParams", "mbw_simulate", "mbw_step", "pea_default", "Model", "MBWModel",
+           "Param"]
