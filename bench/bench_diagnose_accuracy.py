@@ -24,6 +24,8 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
+from hyst_model.diagnose.unexplained import UNEXPLAINED_FACTOR  # noqa: E402
+
 
 def _rmse(e) -> float:
     return float(np.sqrt(np.mean(np.square(e))))
@@ -98,12 +100,12 @@ def summarise(res: list[dict]) -> str:
         elif b == "outside":
             ok = r["named"][0] == "unexplained" or r.get("unexplained") is not None
         else:  # PI truth: right answer depends on whether the base error is large
-            big = r.get("base_over_noise", 0) >= 5
+            big = r.get("base_over_noise", 0) >= UNEXPLAINED_FACTOR
             ok = (r["named"][0] == "unexplained" or r.get("unexplained") is not None) if big else r["named"][0] == "none"
         stats[b][0] += ok
         stats[b][1] += 1
     targets = {"single ≥5×": "≥ 90 %", "single 3–5×": "≥ 70 %", "pair": "both in top 2 ≥ 80 %",
-               "none": "false alarms ≤ 5 %", "outside": "never a bare none", "pi_truth": "unexplained iff ≥5× noise"}
+               "none": "false alarms ≤ 5 %", "outside": "never a bare none", "pi_truth": f"unexplained iff ≥{UNEXPLAINED_FACTOR:g}× noise"}
     lines.append(f"{'band':<14}{'right':>8}{'cases':>7}{'rate':>8}   target")
     targets["single <3×"] = "(below the issue's range: the form could not reach its size here)"
     for b in ("single ≥5×", "single 3–5×", "single <3×", "pair", "none", "outside", "pi_truth"):
@@ -111,7 +113,8 @@ def summarise(res: list[dict]) -> str:
             k, n = stats[b]
             lines.append(f"{b:<14}{k:>8}{n:>7}{k / n:>8.0%}   {targets[b]}")
     named = [r for r in res if "fresh_final" in r and r["named"][0] not in ("none", "unexplained")]
-    falls = [r["fresh_base"] / r["fresh_final"] for r in named]
+    falls = [r["fresh_base"] / r["fresh_final"] for r in named
+             if np.isfinite(r["fresh_base"]) and np.isfinite(r["fresh_final"]) and r["fresh_final"] > 0]
     # cases where refitting with the TRUE effect names cuts the fresh-record error ≥ 3×: does the diagnosis too?
     possible = [r["fresh_base"] / r["fresh_final"] for r in res
                 if r.get("fresh_true") and r["fresh_base"] / r["fresh_true"] >= 3.0]

@@ -1,7 +1,7 @@
 """A fixed subset of the accuracy benchmark (bench/bench_diagnose_accuracy.py) as tests.
 
 Seeds are the first of each kind in family seed 42 — not chosen for passing. What holds on held-out families
-is asserted (no false alarm on 'none'; never a bare 'none' when the base error is ≥ 5× the noise; the first four
+is asserted (no false alarm on 'none'; never a bare 'none' when the base error is ≥ 2× the noise; the first four
 large single effects named first). The rates over 200 cases are in the README (bench_diagnose_accuracy).
 """
 from __future__ import annotations
@@ -31,10 +31,11 @@ def test_no_false_alarm_on_none(i):
 
 @pytest.mark.parametrize("i,kind", [(0, "outside"), (1, "outside"), (0, "pi_truth"), (1, "pi_truth")])
 def test_a_large_error_is_never_a_bare_none(i, kind):
+    from hyst_model.diagnose.unexplained import UNEXPLAINED_FACTOR
     r = _run(i, kind)
-    if r["base_over_noise"] >= 5:
+    if r["base_over_noise"] >= UNEXPLAINED_FACTOR:
         assert r["named"][0] != "none" and (r["missing"] == "unexplained" or r["unexplained"] is not None), r
-    else:
+    elif r["base_over_noise"] <= 1.25:
         assert r["named"] == ["none"], r
 
 

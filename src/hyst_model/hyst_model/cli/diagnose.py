@@ -6,7 +6,7 @@ in words, the error ladder and the verdict (see :mod:`hyst_model.diagnose.diagno
 one JSON object; ``--report DIR`` writes the HTML report of :mod:`hyst_model.diagnose.report`.
 
 Exit status: 0 when an effect is named or nothing is missing (``none``), 3 when the error is ``unexplained``
-(at least 5× the noise floor and no library effect explains it; the JSON's ``unexplained`` says whether it is
+(at least 2× the noise floor and no library effect explains it; the JSON's ``unexplained`` says whether it is
 the loop shape or something outside the library), 2 for bad input.
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ def register(subparsers) -> None:
         "diagnose", help="name the physical effect the model is missing (creep, delay, drift, ...)",
         description="Fit the base model, test each effect by its residual signature and a validated refit, "
                     "rank them and name the missing one ('none' when the residual is at the noise floor, "
-                    "'unexplained' when it is ≥ 5× the noise floor and no library effect explains it).",
+                    "'unexplained' when it is ≥ 2× the noise floor and no library effect explains it).",
         epilog="exit status: 0 effect named or none missing; 3 unexplained; 2 bad input")
     p.add_argument("data", metavar="DATA", help="rosbag2 directory / .mcap file (/stage/state) or CSV file")
     p.add_argument("--base", default="mbw", choices=("mbw", "bw"), help="base model (default mbw)")
