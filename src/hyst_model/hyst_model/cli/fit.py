@@ -93,17 +93,15 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from ..io.outputs import check_output
+    if args.out:  # fail before the imports and a long fit, not after them
+        check_output(args.out, force=args.force, what="--out")
     from ..identify import fit
     from ..io import spec_from_model, write_params
     from ..models import BASE_MODELS, data_config
     from ..spec import build_model
 
     out = Path(args.out) if args.out else None
-    if out is not None:  # fail before a long fit, not after it
-        if out.exists() and not args.force:
-            raise ParamsError(f"{out} exists; use --force to overwrite it")
-        if not (out.parent if str(out.parent) else Path(".")).is_dir():
-            raise ParamsError(f"{out.parent}: no such directory")
     if args.model not in BASE_MODELS:
         raise ParamsError(f"unknown model {args.model!r}; choose one of {', '.join(sorted(BASE_MODELS))}")
     effects = [e.strip() for e in args.effects.split(",") if e.strip()]

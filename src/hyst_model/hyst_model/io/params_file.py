@@ -147,17 +147,16 @@ def write_params(path: str | Path, spec: ParamsSpec, *, force: bool = False, nod
     ParamsError
         ``path`` exists and ``force`` is false, or its directory does not exist.
     """
-    path = Path(path)
-    if path.exists() and not force:
-        raise ParamsError(f"{path} exists; use --force to overwrite it")
-    if path.is_dir():
-        raise ParamsError(f"{path} is a directory")
+    from .outputs import apply_umask, check_output
+    path = check_output(path, force=force, what="params file")
     parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise ParamsError(f"{parent}: no such directory")
     text = to_yaml(spec, node)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
     try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
+    except OSError as err:
+        raise ParamsError(f"cannot write {path}: {err.strerror or err}") from err
+    try:
+        apply_umask(fd)  # mkstemp creates 0600; the user expects their umask, also after --force
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
             fh.flush()
@@ -170,6 +169,8 @@ def write_params(path: str | Path, spec: ParamsSpec, *, force: bool = False, nod
             except FileExistsError:
                 raise ParamsError(f"{path} exists; use --force to overwrite it") from None
             os.unlink(tmp)
+    except OSError as err:
+        raise ParamsError(f"cannot write {path}: {err.strerror or err}") from err
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
