@@ -193,8 +193,9 @@ def read_params(path: str | Path) -> ParamsSpec:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ParamsError(f"{path}: no such params file") from None
-    except (OSError, yaml.YAMLError) as err:
-        raise ParamsError(f"{path}: cannot read params file ({err})") from err
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as err:
+        msg = " ".join(str(err).split())[:200]  # one line, even for a YAML error with a context block
+        raise ParamsError(f"{path}: cannot read params file ({msg})") from err
     if not isinstance(doc, Mapping):
         raise ParamsError(f"{path}: not a ROS 2 parameters file (expected '/**: ros__parameters: model: ...')")
     section = None
@@ -232,4 +233,18 @@ def read_params(path: str | Path) -> ParamsSpec:
     if bad:
         raise ParamsError(f"{path}: non-finite value for {', '.join(bad)}")
     spec.theta(m)  # every parameter present
+    _check_scales(path, spec.config)
     return spec
+
+
+def _check_scales(path: Path, config: dict) -> None:
+    """A missing scale silently defaulting to 1.0 gave a −6 cm output (issue 13): the scales and dt are required."""
+    for key in ("u_scale", "y_scale", "dt"):
+        v = config.get(key)
+        if v is None and key == "dt":
+            continue  # optional (a model written without a sample period); when given it must be positive
+        if v is None:
+            raise ParamsError(f"{path}: model.{key} missing (hyst fit writes it; add it by hand, e.g. "
+                              f"{key}: 1.0)")
+        if isinstance(v, str) or not np.isfinite(v) or v <= 0:
+            raise ParamsError(f"{path}: model.{key} must be a positive number, got {v!r}")
