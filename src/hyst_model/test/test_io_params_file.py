@@ -103,3 +103,30 @@ def test_unwritable_targets_refused_before_work(tmp_path, target, match):
     _, _, spec = _spec()
     with pytest.raises(ParamsError, match=match):
         write_params(target.format(tmp=tmp_path), spec, force=True)
+
+
+@pytest.mark.parametrize("drop,extra,match", [
+    ("u_scale", {}, "model.u_scale missing"),
+    ("y_scale", {}, "model.y_scale missing"),
+    (None, {"dt": 0.0}, "model.dt must be a positive number"),
+])
+def test_scales_required_and_dt_positive(tmp_path, drop, extra, match):
+    import yaml
+    _, _, spec = _spec()
+    p = tmp_path / "p.yaml"
+    write_params(p, spec)
+    doc = yaml.safe_load(p.read_text())
+    m = doc["/**"]["ros__parameters"]["model"]
+    m.pop(drop, None)
+    m.update(extra)
+    p.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParamsError, match=match):
+        read_params(p)
+
+
+def test_binary_params_one_line(tmp_path):
+    p = tmp_path / "g.bin"
+    p.write_bytes(bytes(range(256)) * 4)
+    with pytest.raises(ParamsError, match="cannot read params file") as ei:
+        read_params(p)
+    assert "\n" not in str(ei.value)
