@@ -93,6 +93,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    if not Path(args.data).exists():  # say it at once, before the heavy imports
+        raise DataError(f"{args.data}: no such file or bag")
     from ..io.outputs import check_output
     if args.out:  # fail before the imports and a long fit, not after them
         check_output(args.out, force=args.force, what="--out")
