@@ -3,7 +3,17 @@
 Layers: :mod:`hyst_model.core` (numerical, numpy/numba only) · :mod:`hyst_model.io` (bags, CSV, params files)
 · ``*_node.py`` modules (thin rclpy nodes; the only place rclpy is imported).
 """
-from .core import MBWParams, mbw_simulate, mbw_step, pea_default
-from .model import MBWModel, Model, Param
+# Lazy (PEP 562): ``hyst --help`` and an immediate argument error must not pay for numpy/numba, and the
+# entry point sets single-threaded BLAS before numpy loads (hyst_model.runtime.single_threaded_blas).
+_LAZY = {"MBWParams": "core", "mbw_simulate": "core", "mbw_step": "core", "pea_default": "core",
+         "Model": "model", "MBWModel": "model", "Param": "model"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = ["MBWParams", "mbw_simulate", "mbw_step", "pea_default", "Model", "MBWModel", "Param"]

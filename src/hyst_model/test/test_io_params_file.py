@@ -54,7 +54,7 @@ def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
     def boom(*a, **k):
         raise OSError("disk full")
     monkeypatch.setattr(os, "replace", boom)
-    with pytest.raises(OSError):
+    with pytest.raises(ParamsError, match="disk full"):
         write_params(p, spec, force=True)
     assert p.read_text() == "precious\n" and sorted(os.listdir(tmp_path)) == ["p.yaml"]
 
@@ -77,3 +77,56 @@ def test_bad_files(tmp_path, text, err, match):
 def test_flatten_nest_inverse():
     d = {"zeta1": 1.0, "creep": {"gain": 2.0, "tau": {"a": 3.0}}}
     assert nest(flatten(d)) == d and flatten(d)["creep.tau.a"] == 3.0
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_written_with_the_user_umask_also_after_force(tmp_path, force):
+    _, _, spec = _spec()
+    p = tmp_path / "p.yaml"
+    if force:
+        p.write_text("old\n")
+        p.chmod(0o644)
+    old = os.umask(0o022)
+    try:
+        write_params(p, spec, force=force)
+    finally:
+        os.umask(old)
+    assert (p.stat().st_mode & 0o777) == 0o644
+
+
+@pytest.mark.parametrize("target,match", [
+    ("/proc/self/nope.yaml", "special file system"),
+    ("{tmp}/missing/p.yaml", "does not exist"),
+    ("{tmp}", "is a directory"),
+])
+def test_unwritable_targets_refused_before_work(tmp_path, target, match):
+    _, _, spec = _spec()
+    with pytest.raises(ParamsError, match=match):
+        write_params(target.format(tmp=tmp_path), spec, force=True)
+
+
+@pytest.mark.parametrize("drop,extra,match", [
+    ("u_scale", {}, "model.u_scale missing"),
+    ("y_scale", {}, "model.y_scale missing"),
+    (None, {"dt": 0.0}, "model.dt must be a positive number"),
+])
+def test_scales_required_and_dt_positive(tmp_path, drop, extra, match):
+    import yaml
+    _, _, spec = _spec()
+    p = tmp_path / "p.yaml"
+    write_params(p, spec)
+    doc = yaml.safe_load(p.read_text())
+    m = doc["/**"]["ros__parameters"]["model"]
+    m.pop(drop, None)
+    m.update(extra)
+    p.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParamsError, match=match):
+        read_params(p)
+
+
+def test_binary_params_one_line(tmp_path):
+    p = tmp_path / "g.bin"
+    p.write_bytes(bytes(range(256)) * 4)
+    with pytest.raises(ParamsError, match="cannot read params file") as ei:
+        read_params(p)
+    assert "\n" not in str(ei.value)

@@ -71,6 +71,11 @@ def _text(d, source: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point; returns the exit code (errors raise HystError → exit 2 in the dispatcher)."""
+    from ..io.outputs import check_output
+    if getattr(args, "out", None):  # refuse now, not after minutes of fitting
+        check_output(args.out, force=args.force, what="--out")
+    if getattr(args, "report", None):
+        check_output(args.report, force=args.force, what="--report", directory=True)
     from ..diagnose.diagnose import diagnose
     from ..effects import load_effect_module
     from ..errors import EffectError

@@ -25,8 +25,10 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--topic", default="/stage/state", help="state topic in a bag (default /stage/state)")
     p.add_argument("--columns", help="CSV columns for t,u,y, e.g. t_s,voltage_V,displacement_um (default t,u,y)")
     p.add_argument("--units", help="units of those columns, e.g. s,V,um (default: from the name suffix, else SI)")
-    p.add_argument("--gaps", choices=("error", "longest"), default="error",
-                   help="lost samples in the record: stop with an error (default) or keep the longest regular part")
+    p.add_argument("--gaps", choices=("auto", "bridge", "longest", "refuse"), default="auto",
+                   help="missed sample periods: bridge short gaps and keep the longest part between long ones "
+                        "(auto, default), bridge all (u held, y interpolated), keep the longest regular part, "
+                        "or refuse; repeated (lockstep) time stamps are always collapsed")
     p.add_argument("--salvage", action="store_true",
                    help="read an MCAP bag whose recorder was killed (no footer) up to its damaged end")
     p.add_argument("--resample", type=float, metavar="HZ",
@@ -54,11 +56,10 @@ def load_checked(args) -> "Record":  # noqa: F821
                       salvage=getattr(args, "salvage", False))
     if rec.meta.get("salvaged"):
         print(f"hyst: note: {args.data} is damaged; salvaged {len(rec)} samples before the damage", file=sys.stderr)
-    if args.gaps == "longest":
-        rec = rec.longest_segment()
-        if rec.meta.get("dropped_samples"):
-            print(f"hyst: note: using samples {rec.meta['segment'][0]}–{rec.meta['segment'][1]} of {args.data} "
-                  f"(dropped {rec.meta['dropped_samples']})", file=sys.stderr)
+    from ..io.regular import regularise
+    rec, notes = regularise(rec, args.gaps)
+    for note in notes:
+        print(f"hyst: note: {args.data}: {note}", file=sys.stderr)
     rec.check()
     if args.resample:
         if not args.resample > 0:
@@ -92,17 +93,17 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    if not Path(args.data).exists():  # say it at once, before the heavy imports
+        raise DataError(f"{args.data}: no such file or bag")
+    from ..io.outputs import check_output
+    if args.out:  # fail before the imports and a long fit, not after them
+        check_output(args.out, force=args.force, what="--out")
     from ..identify import fit
     from ..io import spec_from_model, write_params
     from ..models import BASE_MODELS, data_config
     from ..spec import build_model
 
     out = Path(args.out) if args.out else None
-    if out is not None:  # fail before a long fit, not after it
-        if out.exists() and not args.force:
-            raise ParamsError(f"{out} exists; use --force to overwrite it")
-        if not (out.parent if str(out.parent) else Path(".")).is_dir():
-            raise ParamsError(f"{out.parent}: no such directory")
     if args.model not in BASE_MODELS:
         raise ParamsError(f"unknown model {args.model!r}; choose one of {', '.join(sorted(BASE_MODELS))}")
     effects = [e.strip() for e in args.effects.split(",") if e.strip()]

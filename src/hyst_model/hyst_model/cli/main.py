@@ -13,6 +13,7 @@ import sys
 from importlib.metadata import entry_points
 
 from ..errors import HystError
+from ..runtime import single_threaded_blas
 
 __all__ = ["main", "build_parser"]
 
@@ -51,6 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    single_threaded_blas()  # before any subcommand imports numpy
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

@@ -36,9 +36,8 @@ def run(args) -> int:
     from ..io import read_params, write_csv
     from ..io.csvio import read_input_csv
 
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise DataError(f"{out} exists; use --force to overwrite it")
+    from ..io.outputs import check_output
+    out = check_output(args.out, force=args.force, what="--out")
     spec = read_params(args.params)
     model = spec.model()
     theta = spec.theta(model)

@@ -147,17 +147,16 @@ def write_params(path: str | Path, spec: ParamsSpec, *, force: bool = False, nod
     ParamsError
         ``path`` exists and ``force`` is false, or its directory does not exist.
     """
-    path = Path(path)
-    if path.exists() and not force:
-        raise ParamsError(f"{path} exists; use --force to overwrite it")
-    if path.is_dir():
-        raise ParamsError(f"{path} is a directory")
+    from .outputs import apply_umask, check_output
+    path = check_output(path, force=force, what="params file")
     parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise ParamsError(f"{parent}: no such directory")
     text = to_yaml(spec, node)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
     try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
+    except OSError as err:
+        raise ParamsError(f"cannot write {path}: {err.strerror or err}") from err
+    try:
+        apply_umask(fd)  # mkstemp creates 0600; the user expects their umask, also after --force
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
             fh.flush()
@@ -170,6 +169,8 @@ def write_params(path: str | Path, spec: ParamsSpec, *, force: bool = False, nod
             except FileExistsError:
                 raise ParamsError(f"{path} exists; use --force to overwrite it") from None
             os.unlink(tmp)
+    except OSError as err:
+        raise ParamsError(f"cannot write {path}: {err.strerror or err}") from err
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
@@ -192,8 +193,9 @@ def read_params(path: str | Path) -> ParamsSpec:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ParamsError(f"{path}: no such params file") from None
-    except (OSError, yaml.YAMLError) as err:
-        raise ParamsError(f"{path}: cannot read params file ({err})") from err
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as err:
+        msg = " ".join(str(err).split())[:200]  # one line, even for a YAML error with a context block
+        raise ParamsError(f"{path}: cannot read params file ({msg})") from err
     if not isinstance(doc, Mapping):
         raise ParamsError(f"{path}: not a ROS 2 parameters file (expected '/**: ros__parameters: model: ...')")
     section = None
@@ -231,4 +233,18 @@ def read_params(path: str | Path) -> ParamsSpec:
     if bad:
         raise ParamsError(f"{path}: non-finite value for {', '.join(bad)}")
     spec.theta(m)  # every parameter present
+    _check_scales(path, spec.config)
     return spec
+
+
+def _check_scales(path: Path, config: dict) -> None:
+    """A missing scale silently defaulting to 1.0 gave a −6 cm output (issue 13): the scales and dt are required."""
+    for key in ("u_scale", "y_scale", "dt"):
+        v = config.get(key)
+        if v is None and key == "dt":
+            continue  # optional (a model written without a sample period); when given it must be positive
+        if v is None:
+            raise ParamsError(f"{path}: model.{key} missing (hyst fit writes it; add it by hand, e.g. "
+                              f"{key}: 1.0)")
+        if isinstance(v, str) or not np.isfinite(v) or v <= 0:
+            raise ParamsError(f"{path}: model.{key} must be a positive number, got {v!r}")
