@@ -7,7 +7,8 @@ sim and the driver alike. The command answering the state stamped ``t`` is excit
 repeated stamp — lockstep re-announcing sample 0 — is answered with the same value). After the last sample the
 node answers once more with the rest voltage and stops (exit 0). Parameters (all fixed at start): ``profile``,
 ``rate``, ``v_min``, ``v_max``, ``slew_max``, ``parts``, ``amplitudes``, ``frequency``, ``periods``, ``n_steps``,
-``hold``, ``f_lo``, ``f_hi``, ``seconds``, ``seed`` (see :mod:`hyst_control.excitation`).
+``hold``, ``f_lo``, ``f_hi``, ``seconds``, ``seed`` (see :mod:`hyst_control.excitation`) and
+``wait_for_subscribers`` (no answer until ``/stage/command`` has that many subscribers: 2 with a recorder).
 """
 from __future__ import annotations
 
@@ -48,8 +49,8 @@ class ExciteNode(Node):
         self.answered = 0
         self.add_on_set_parameters_callback(
             lambda _p: SetParametersResult(successful=False, reason="excitation parameters apply at start only"))
-        self._pub = self.create_publisher(JointState, "/stage/command", 100)
-        self.create_subscription(JointState, "/stage/state", self._on_state, 100)
+        self._pub = self.create_publisher(JointState, "/stage/command", 1000)
+        self.create_subscription(JointState, "/stage/state", self._on_state, 1000)
         ex = self.excitation
         self.get_logger().info(
             f"excitation ready: {', '.join(self.spec.parts)}, {ex.duration:.2f} s at {1 / self.spec.dt:g} Hz, "
@@ -86,6 +87,9 @@ class ExciteNode(Node):
                                                     integer_range=_ip(1, 10_000), **ro))
         d("n_steps", s.n_steps, ParameterDescriptor(description="random step levels", integer_range=_ip(1, 10_000),
                                                     **ro))
+        d("wait_for_subscribers", 1, ParameterDescriptor(
+            description="answer no state until /stage/command has this many subscribers (stage + recorder = 2), "
+                        "so a recorder never misses the first commands", integer_range=_ip(1, 100), **ro))
         d("seed", 0, ParameterDescriptor(description="seed of step levels and multisine phases",
                                          integer_range=_ip(0, 2**31 - 1), **ro))
 
@@ -105,6 +109,8 @@ class ExciteNode(Node):
             return
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         if self._t_first is None:
+            if self._pub.get_subscription_count() < self.get_parameter("wait_for_subscribers").value:
+                return  # the lockstep sim re-announces sample 0; a realtime stage just starts later
             self._t_first = t
         k = int(round((t - self._t_first) / self.spec.dt)) + 1
         u = self.excitation.u

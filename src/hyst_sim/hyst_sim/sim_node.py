@@ -16,8 +16,9 @@ Modes
     counts them (``missed_periods`` on /diagnostics) instead of bursting. No command for ``command_timeout`` s
     → the voltage ramps to ``v_safe`` at ``safe_ramp_rate`` V/s.
 ``lockstep`` (deterministic tests)
-    Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has a
-    subscriber and ``/stage/command`` a publisher, and re-published with the *same* stamp every 0.5 s until it
+    Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has
+    ``wait_for_subscribers`` subscribers (default 1; 2 with a recorder: ``hyst_bag_record`` started first then
+    never misses the start) and ``/stage/command`` a publisher, and re-published with the *same* stamp every 0.5 s until it
     is answered. Each command whose ``header.stamp`` equals the latest state's stamp takes exactly one sample
     and publishes state ``k+1`` stamped ``(k+1)/rate`` s; commands with any other stamp (duplicates, answers to
     a repeated state) are dropped and counted as stale. Same parameters and seed → same data, bit for bit.
@@ -121,7 +122,9 @@ class SimNode(Node):
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
 
-        self._pub = self.create_publisher(JointState, "/stage/state", 10)
+        # deep history: a reliable subscriber that is slow for a moment (a recorder) must not lose samples
+        self._pub = self.create_publisher(JointState, "/stage/state", 1000)
+        self._wait_n = int(self.get_parameter("wait_for_subscribers").value)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(JointState, "/stage/command", self._on_command, 10)
         self._cmd = None                 # (last commanded voltage V, monotonic arrival time), one object: atomic
@@ -178,6 +181,10 @@ class SimNode(Node):
         d("mode", "realtime", ParameterDescriptor(
             description="realtime | lockstep (one sample per answered state; deterministic)", read_only=True,
             additional_constraints="one of: realtime, lockstep; fixed at start"))
+        d("wait_for_subscribers", 1, ParameterDescriptor(
+            description="lockstep: publish sample 0 only once /stage/state has this many subscribers (controller "
+                        "+ recorder = 2), so no subscriber misses the start", read_only=True,
+            integer_range=[IntegerRange(from_value=1, to_value=100, step=1)]))
         d("params_file", "", ParameterDescriptor(description="MBW params file ('' = embedded default stage)"))
         d("scenario_file", "", ParameterDescriptor(
             description="hidden-effects scenario file ('' = none); its contents are never reported"))
@@ -334,7 +341,7 @@ class SimNode(Node):
             self.destroy_timer(self._timer)
             self._timer = None
             return
-        if self._pub.get_subscription_count() == 0 or self.count_publishers("/stage/command") == 0:
+        if self._pub.get_subscription_count() < self._wait_n or self.count_publishers("/stage/command") == 0:
             return
         now = time.monotonic()
         if now < self._announce_at:
@@ -392,7 +399,8 @@ def usage() -> str:
              "parameters (shared with the driver unless marked sim):",
              "  rate [Hz] 1000 (1..5000)   profile pea|gma   v_min, v_max, v_safe [V] (profile defaults)",
              "  slew_max [V/s]   command_timeout [s] 0.2   safe_ramp_rate [V/s] 100 (sim)   frame_id 'stage'",
-             "  mode realtime|lockstep (sim)   params_file (sim)   scenario_file (sim, hidden)   seed (sim)",
+             "  mode realtime|lockstep (sim)   wait_for_subscribers (sim, lockstep) 1   params_file (sim)",
+             "  scenario_file (sim, hidden)   seed (sim)",
              "effects (sim; 0 = off):"]
     for name in EFFECT_NAMES:
         spec = Effects.spec(name)
