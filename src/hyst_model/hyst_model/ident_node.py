@@ -8,8 +8,14 @@ parameter services), then
 * the params file ``params_file`` is written atomically (an existing file the node did not write itself is only
   replaced with ``overwrite: true``),
 * a JSON summary is published on ``~/fit_result`` (``std_msgs/String``, transient local),
-* with ``controller_node`` set (e.g. ``/hyst_controller``) the ``model.*`` parameters are pushed to that node
-  through its parameter service (``AsyncParameterClient.set_parameters_atomically``: all or nothing).
+* with ``controller_node`` set (e.g. ``/hyst_controller``) every ``model.*`` parameter — the MBW parameters,
+  ``offset``, the scales ``u_scale``/``y_scale`` and the sample period ``model.dt`` (the controller refuses a model
+  identified at another rate) — is pushed to that node through its parameter service
+  (``AsyncParameterClient.set_parameters_atomically``: all or nothing).
+
+Bags are regularised before fitting (:func:`hyst_model.io.record.regularise`): lockstep duplicate stamps are
+collapsed, missed periods handled as the ``gaps`` parameter says (``auto`` | ``bridge`` | ``longest`` |
+``refuse``); what was changed is logged and listed under ``notes`` in the summary.
 
 A bad bag is logged and skipped; the node carries on. Parameters are declared with descriptors and ranges,
 validated in the on-set callback and applied by swapping a frozen config.
@@ -40,6 +46,7 @@ from .runtime import wants_help
 __all__ = ["IdentConfig", "IdentNode", "main", "fit_bag", "controller_parameters"]
 
 _METHODS = ("fast", "epso", "lsq")
+_GAPS = ("auto", "bridge", "longest", "refuse")
 
 USAGE = (
     'hyst_ident_node: refit the stage model from rosbag2 recordings (given bags or a watched folder), write the\n'
@@ -68,11 +75,14 @@ class IdentConfig:
     overwrite: bool = False
     controller_node: str = ""
     push_timeout: float = 5.0
+    gaps: str = "auto"
 
     def validate(self) -> "IdentConfig":
         from .models import BASE_MODELS
         if self.model not in BASE_MODELS:
             raise ValueError(f"model must be one of {', '.join(sorted(BASE_MODELS))}")
+        if self.gaps not in _GAPS:
+            raise ValueError(f"gaps must be one of {', '.join(_GAPS)}, got {self.gaps!r}")
         if self.method not in _METHODS:
             raise ValueError(f"method must be one of {', '.join(_METHODS)}")
         if self.watch_dir and not Path(self.watch_dir).is_dir():
@@ -92,19 +102,25 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     from .io import read_state_bag
     from .models import data_config
     from .spec import build_model
-    rec = read_state_bag(path, cfg.topic).check()
+    from .io.record import regularise
+    rec, notes = regularise(read_state_bag(path, cfg.topic), cfg.gaps)
+    rec = rec.check()
     config = dict(data_config(rec.u, rec.y), dt=rec.dt)
     model = build_model(cfg.model, cfg.effects, config)
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed,
               split=cfg.val_fraction if cfg.val_fraction > 0 else None)
     summary = {"bag": str(path), "model": cfg.model, "effects": list(cfg.effects), "method": cfg.method,
                "rmse": res.rmse, "rmse_train": res.rmse_train, "seconds": res.seconds, "samples": len(rec),
-               "params": res.params}
+               "params": res.params, "dt": rec.dt, "gaps": cfg.gaps, "notes": list(notes)}
     return summary, model, res, rec.dt
 
 
-def controller_parameters(model, theta) -> list[Parameter]:
-    """``model.*`` parameters the controller node declares (MBW only; BW is MBW with zero rate terms)."""
+def controller_parameters(model, theta, dt: float | None = None) -> list[Parameter]:
+    """Every ``model.*`` parameter the controller node declares (MBW only; BW is MBW with zero rate terms).
+
+    ``dt`` (s), the sample period of the fitted data, is pushed as ``model.dt`` so that the controller can refuse
+    a model identified at another rate (default: the model's own ``dt`` config).
+    """
     base = getattr(model, "base", model)
     if getattr(model, "effects", None):
         raise HystError("the controller takes a plain MBW/BW model, not base + effects")
@@ -112,8 +128,14 @@ def controller_parameters(model, theta) -> list[Parameter]:
         raise HystError(f"the controller inverts MBW; a {base.name!r} model cannot be pushed")
     values = dict(zip(PARAM_NAMES, (0.0,) * 8))
     values.update(model.unpack(theta))
-    values.update({k: float(v) for k, v in model.config().items() if k in ("u_scale", "y_scale")})
-    out = [Parameter("model.base", Parameter.Type.STRING, "mbw")]
+    cfg = model.config()
+    values.update({k: float(v) for k, v in cfg.items() if k in ("u_scale", "y_scale")})
+    missing = [k for k in ("u_scale", "y_scale") if k not in values]
+    dt = float(dt if dt is not None else cfg.get("dt", 0.0) or 0.0)
+    if missing or not dt > 0:
+        raise HystError(f"the model lacks {', '.join(missing) or 'a positive dt'}; the controller needs the scales "
+                        "and the sample period")
+    out = [Parameter("model.base", Parameter.Type.STRING, "mbw"), Parameter("model.dt", Parameter.Type.DOUBLE, dt)]
     out += [Parameter(f"model.{k}", Parameter.Type.DOUBLE, float(values[k]))
             for k in PARAM_NAMES + ("offset", "u_scale", "y_scale")]
     return out
@@ -175,6 +197,9 @@ class IdentNode(Node):
             description="replace a params file that existed before this node wrote it"))
         d("controller_node", "", ParameterDescriptor(
             description="push model.* to this node after each fit, e.g. /hyst_controller ('' = off)"))
+        d("gaps", "auto", ParameterDescriptor(
+            description="missed sample periods in a bag: auto (bridge short gaps, keep the longest part between "
+                        "long ones) | bridge | longest | refuse; lockstep duplicate stamps are always collapsed"))
         d("push_timeout", 5.0, ParameterDescriptor(description="wait this long for the controller's parameter "
                                                                "service (s)", floating_point_range=_fp(0.1, 600)))
 
@@ -192,7 +217,7 @@ class IdentNode(Node):
             effects=tuple(get("effects") or ()), method=str(get("method")), seed=int(get("seed")),
             val_fraction=float(get("val_fraction")), params_file=str(get("params_file")),
             overwrite=bool(get("overwrite")), controller_node=str(get("controller_node")),
-            push_timeout=float(get("push_timeout")))
+            push_timeout=float(get("push_timeout")), gaps=str(get("gaps")))
 
     def _on_set(self, params) -> SetParametersResult:
         try:
@@ -264,6 +289,8 @@ class IdentNode(Node):
 
     def _deliver(self, summary: dict, model, res, dt: float) -> None:
         cfg = self._cfg
+        for note in summary.get("notes", ()):
+            self.get_logger().info(f"{summary['bag']}: {note}")
         self.get_logger().info(f"{summary['bag']}: validation RMSE {res.rmse * 1e9:.2f} nm "
                                f"(train {res.rmse_train * 1e9:.2f} nm, {res.seconds:.2f} s)")
         if cfg.params_file:
@@ -279,13 +306,13 @@ class IdentNode(Node):
                 self.get_logger().error(f"not written: {err} (set overwrite:=true to replace it)")
                 summary["params_file_error"] = str(err)
         if cfg.controller_node:
-            self._push(model, res.theta, summary)
+            self._push(model, res.theta, summary, dt)
         self._publish(summary)
 
-    def _push(self, model, theta, summary: dict) -> None:
+    def _push(self, model, theta, summary: dict, dt: float) -> None:
         cfg = self._cfg
         try:
-            params = controller_parameters(model, theta)
+            params = controller_parameters(model, theta, dt)
         except HystError as err:
             self.get_logger().warning(f"not pushed: {err}")
             summary["push"] = f"skipped: {err}"
@@ -333,9 +360,13 @@ class IdentNode(Node):
         return super().destroy_node()
 
 
-def main(args=None) -> None:
+def main(args=None) -> int:
+    """Console script ``hyst_ident_node``; bad start parameters: one line on stderr, exit 2 (issue 13)."""
+    import sys
+
+    from rclpy.exceptions import ParameterException
     if wants_help(args, USAGE):
-        return
+        return 0
     rclpy.init(args=args)
     node = None
     try:
@@ -343,14 +374,15 @@ def main(args=None) -> None:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except HystError as err:
-        import sys
+    except (HystError, ParameterException) as err:
         print(f"hyst_ident_node: error: {err}", file=sys.stderr)
+        return 2
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())
