@@ -21,6 +21,11 @@ Signal chain per sample ``k`` (see :mod:`hyst_sim.truth_effects` for each effect
     u_applied ─ delay ─▶ MBW(u/u_scale) · y_scale + offset ─ asymmetry ─ creep ─ saturation ─ dynamics ─▶ x
     x ─ + drift ─ + noise ─ quantisation ─▶ y (what the sensor reports)
 
+The stage is physically bounded: the true position ``x`` (and the MBW state with it) cannot pass the mechanical
+stops ``stroke ± stop_margin·span``. An input the model cannot follow (e.g. 0/150 V alternating at 1 kHz makes
+the MBW recursion diverge) leaves the stage at a stop, flagged :data:`AT_STOP`, instead of a number that runs away
+(−724 m after 80 samples, then a wrapped −1.8e10 m reading); the sim node reports it as a fault.
+
 With every effect off, ``y`` equals :meth:`hyst_model.core.MBWParams.simulate` of the applied voltage exactly
 (the plant calls :func:`hyst_model.core.mbw_step`; there is no second MBW implementation). The MBW parameters
 are per plant sample; ``mbw_substeps`` > 1 runs the recursion that many times per sample with the input held
@@ -40,9 +45,14 @@ from hyst_model.core import MBWParams, mbw_rest_state, mbw_step
 
 from .errors import ConfigError, SimError
 from .profiles import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, clip_kernel, get_profile
+from .stroke import check_bounded, rest_stroke
 from .truth_effects import Effects, asymmetry_kernel, creep_kernel, dynamics_kernel, saturation_kernel
 
-__all__ = ["PlantConfig", "Plant", "StepResult", "RunResult", "CLIP_RANGE", "CLIP_SLEW", "CLIP_NONFINITE"]
+__all__ = ["PlantConfig", "Plant", "StepResult", "RunResult", "CLIP_RANGE", "CLIP_SLEW", "CLIP_NONFINITE",
+           "AT_STOP"]
+
+#: Flag bit: the stage was held by a mechanical stop during the sample (see the module docstring).
+AT_STOP = 8
 
 _NORMAL_BLOCK = 4096  # rows of pre-drawn N(0,1) pairs; the stream is the same however it is consumed
 
@@ -72,6 +82,9 @@ class PlantConfig:
         Physical effects; all off by default.
     seed : int
         Seed of the noise/drift random stream (:meth:`Plant.reset` restarts it).
+    stop_margin : float
+        Mechanical stops at ``stroke`` widened by this fraction of its span on each side (hysteresis loops and
+        creep pass the rest displacements a little; a real stage's travel ends not far beyond).
     """
 
     mbw: MBWParams
@@ -84,6 +97,7 @@ class PlantConfig:
     mbw_substeps: int = 1
     effects: Effects = field(default_factory=Effects)
     seed: int = 0
+    stop_margin: float = 0.25
 
     def __post_init__(self) -> None:
         self.validate()
@@ -105,6 +119,8 @@ class PlantConfig:
             raise ConfigError("MBW parameters must be finite with positive u_scale and y_scale")
         if self.stroke is not None and not (len(self.stroke) == 2 and self.stroke[0] < self.stroke[1]):
             raise ConfigError("stroke must be (x_lo, x_hi) with x_lo < x_hi (m)")
+        if not (math.isfinite(self.stop_margin) and 0.0 <= self.stop_margin <= 10.0):
+            raise ConfigError(f"stop_margin must be in [0, 10] (fraction of the stroke), got {self.stop_margin!r}")
         if not isinstance(self.effects, Effects):
             raise ConfigError("effects must be an Effects instance")
         self.effects.validate()
@@ -190,11 +206,13 @@ def substeps_for(dt: float, model_dt: float) -> int:
 
 
 class StepResult(NamedTuple):
-    """One sample: sensor reading ``y`` (m), voltage ``u_applied`` (V), ``clipped`` (range/slew/non-finite)."""
+    """One sample: sensor reading ``y`` (m), voltage ``u_applied`` (V), ``clipped`` (range/slew/non-finite),
+    ``at_stop`` (the stage was held by a mechanical stop)."""
 
     y: float
     u_applied: float
     clipped: bool
+    at_stop: bool = False
 
 
 class RunResult(NamedTuple):
@@ -209,12 +227,16 @@ class RunResult(NamedTuple):
 
     @property
     def clipped(self) -> np.ndarray:
-        return self.flags != 0
+        return (self.flags & (CLIP_RANGE | CLIP_SLEW | CLIP_NONFINITE)) != 0
+
+    @property
+    def at_stop(self) -> np.ndarray:
+        return (self.flags & AT_STOP) != 0
 
 
 # Indices into the packed float settings (_F) and state (_S) arrays of the compiled loop.
 (F_US, F_YS, F_OFF, F_VMIN, F_VMAX, F_STEP, F_SUB, F_ASYM, F_XMID, F_HALF, F_CREEP, F_SAT, F_SATLO, F_SATHI,
- F_SATW, F_DYN, F_DR, F_DA, F_DW, F_DQ, F_NOISE, F_QUANT, F_DT, F_DELAY) = range(24)
+ F_SATW, F_DYN, F_DR, F_DA, F_DW, F_DQ, F_NOISE, F_QUANT, F_DT, F_DELAY, F_STOPLO, F_STOPHI) = range(26)
 (S_Y, S_UM, S_UA, S_T, S_DRIFT, S_DT_T, S_DIDX, S_XQ, S_X) = range(9)
 
 
@@ -235,9 +257,18 @@ def _plant_loop(u_cmd, p, f, st, creep_a, creep_c, phi, gam, dz, dbuf, normals, 
         um = ue / f[F_US]
         y = st[S_Y]
         up = st[S_UM]
+        ylo = (f[F_STOPLO] - f[F_OFF]) / f[F_YS]
+        yhi = (f[F_STOPHI] - f[F_OFF]) / f[F_YS]
         for _ in range(n_sub):
             y = mbw_step(p, y, um, up)
             up = um
+            # the mechanical stop holds the stage, and with it the hysteresis state (NaN -> diverged: at a stop)
+            if y > yhi:
+                y = yhi
+                flags |= 8
+            elif not y >= ylo:
+                y = ylo
+                flags |= 8
         st[S_Y] = y
         st[S_UM] = um
         x = f[F_YS] * y + f[F_OFF]
@@ -250,6 +281,12 @@ def _plant_loop(u_cmd, p, f, st, creep_a, creep_c, phi, gam, dz, dbuf, normals, 
             x = saturation_kernel(x, f[F_SATLO], f[F_SATHI], f[F_SATW])
         if f[F_DYN] != 0.0:
             x = dynamics_kernel(dz, phi, gam, x)
+        if x > f[F_STOPHI]:
+            x = f[F_STOPHI]
+            flags |= 8
+        elif not x >= f[F_STOPLO]:  # NaN included
+            x = f[F_STOPLO]
+            flags |= 8
         st[S_X] = x
         ym = x
         if f[F_DR] != 0.0:
@@ -355,7 +392,9 @@ class Plant:
         self._u1[0] = u_cmd
         oy, ou, of, ox = self._out1
         self._advance(self._u1, oy, ou, of, ox)
-        return StepResult(float(oy[0]), float(ou[0]), bool(of[0]))
+        fl = int(of[0])
+        return StepResult(float(oy[0]), float(ou[0]), bool(fl & (CLIP_RANGE | CLIP_SLEW | CLIP_NONFINITE)),
+                          bool(fl & AT_STOP))
 
     def run(self, u_cmd) -> RunResult:
         """Apply a whole command record (V), continuing from the current state; equal to repeated :meth:`step`."""
@@ -385,12 +424,13 @@ class Plant:
         if not isinstance(cfg, PlantConfig):
             raise ConfigError("Plant needs a PlantConfig")
         p = np.ascontiguousarray(cfg.mbw.vector)
-        stroke = cfg.stroke or _rest_stroke(cfg.mbw, p, cfg.v_min, cfg.v_max)
-        _check_bounded(cfg, p, stroke)
+        stroke = cfg.stroke or rest_stroke(cfg.mbw, p, cfg.v_min, cfg.v_max)
+        check_bounded(cfg, p, stroke)
         e = cfg.effects
         lo, hi = stroke
         span = hi - lo
-        f = np.zeros(24)
+        f = np.zeros(26)
+        f[F_STOPLO], f[F_STOPHI] = lo - cfg.stop_margin * span, hi + cfg.stop_margin * span
         f[F_US], f[F_YS], f[F_OFF] = cfg.mbw.u_scale, cfg.mbw.y_scale, cfg.mbw.offset
         f[F_VMIN], f[F_VMAX], f[F_STEP] = cfg.v_min, cfg.v_max, cfg.slew_max * cfg.dt
         f[F_SUB], f[F_DT], f[F_DELAY] = cfg.mbw_substeps, cfg.dt, e.delay.strength
@@ -454,26 +494,3 @@ class Plant:
 
 
 _ZERO_PAIR = np.zeros((1, 2))
-
-
-def _rest_stroke(mbw: MBWParams, p: np.ndarray, v_min: float, v_max: float) -> tuple[float, float]:
-    lo = mbw.y_scale * mbw_rest_state(p, v_min / mbw.u_scale) + mbw.offset
-    hi = mbw.y_scale * mbw_rest_state(p, v_max / mbw.u_scale) + mbw.offset
-    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
-        raise ConfigError("the MBW model has no finite, increasing rest displacement over [v_min, v_max]; "
-                          "check the params file")
-    return lo, hi
-
-
-def _check_bounded(cfg: PlantConfig, p: np.ndarray, stroke: tuple[float, float]) -> None:
-    """Refuse a model that diverges on a full-range 1 Hz and 50 Hz triangle sweep (a bad params file)."""
-    from hyst_model.core import mbw_simulate
-
-    span = stroke[1] - stroke[0]
-    for f_hz in (1.0, 50.0):
-        n = max(8, int(round(1.0 / (f_hz * cfg.dt))))
-        tri = 1.0 - np.abs(np.linspace(-1.0, 1.0, n))
-        u = (cfg.v_min + (cfg.v_max - cfg.v_min) * tri) / cfg.mbw.u_scale
-        y = cfg.mbw.y_scale * mbw_simulate(p, np.ascontiguousarray(np.tile(u, 2)), 0.0, np.nan)
-        if not (np.all(np.isfinite(y)) and np.max(np.abs(y)) < 100.0 * span + abs(cfg.mbw.offset)):
-            raise ConfigError(f"the MBW model diverges on a {f_hz:g} Hz full-range sweep; check the params file")

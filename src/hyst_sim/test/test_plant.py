@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hyst_model.core import pea_default
-from hyst_sim.errors import ConfigError, SimError
+from hyst_sim.errors import ConfigError
 from hyst_sim.plant import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, Plant, PlantConfig
 from hyst_sim.profiles import GMA, PEA
 
@@ -181,7 +181,7 @@ def test_clipping_never_leaves_the_profile_and_flags_every_change(cmds, profile)
 
 def test_clip_flags_name_the_reason():
     plant = Plant(BASE.replace(slew_max=1000.0))                   # 1 V per sample
-    assert plant.step(0.5)[1:] == (0.5, False)
+    assert plant.step(0.5)[1:] == (0.5, False, False)
     r = plant.step(100.0)
     assert r.u_applied == 1.5 and r.clipped
     out = plant.run([-5.0, np.nan, 1.2, 3.0])
@@ -220,8 +220,26 @@ def test_bad_configurations_are_refused_with_a_reason():
         Plant(BASE).reset(-1.0)
 
 
-def test_a_diverging_state_raises_instead_of_publishing_nan():
+def test_a_broken_state_ends_at_a_stop_flagged_never_a_runaway_number():
     plant = Plant(BASE)
     plant._st[0] = np.inf  # simulate a numerically broken state
-    with pytest.raises(SimError, match="diverged"):
-        plant.step(10.0)
+    r = plant.step(10.0)
+    lo, hi = plant.stroke_range
+    assert r.at_stop and not r.clipped and lo - 0.3 * (hi - lo) <= r.y <= hi + 0.3 * (hi - lo)
+
+
+@pytest.mark.parametrize("rate,slew", [(1000.0, 1e5), (1000.0, np.inf), (2000.0, np.inf), (500.0, np.inf)])
+def test_alternating_full_range_input_is_bounded_by_the_stops(rate, slew):
+    """Issue 11: 0/150 V alternating drove the plant to -0.4 mm in 10 samples and -724 m in 80."""
+    cfg = PlantConfig.for_profile("pea", rate, sensor=True, slew_max=slew)
+    plant = Plant(cfg)
+    out = plant.run(np.tile([0.0, 150.0], 200))
+    lo, hi = plant.stroke_range
+    m = cfg.stop_margin * (hi - lo)
+    assert np.all(np.isfinite(out.y)) and np.all(out.x >= lo - m) and np.all(out.x <= hi + m)
+    assert np.all(out.y >= lo - m - 1e-8) and np.all(out.y <= hi + m + 1e-8)  # + noise and quantisation
+    if slew == np.inf:
+        assert out.at_stop.any()  # the model cannot follow: the stop holds it, and says so
+    # the stop does not touch an ordinary run
+    calm = Plant(cfg).run(75.0 + 70.0 * np.sin(2 * np.pi * 5.0 * np.arange(int(rate)) / rate))
+    assert not calm.at_stop.any()
