@@ -22,6 +22,13 @@ Modes
     is answered. Each command whose ``header.stamp`` equals the latest state's stamp takes exactly one sample
     and publishes state ``k+1`` stamped ``(k+1)/rate`` s; commands with any other stamp (duplicates, answers to
     a repeated state) are dropped and counted as stale. Same parameters and seed → same data, bit for bit.
+
+Health on ``/diagnostics`` (every second): the stage held by a mechanical stop (an input the model cannot follow,
+a diverging model) is an ERROR, never a number; missed realtime periods are a WARN with their share of the
+second (an ERROR above 10 %), clipping a WARN. Parameter sets are all or nothing: :meth:`SimNode.set_parameters`
+validates the whole resulting configuration and applies every parameter or none (remote clients: use the
+``set_parameters_atomically`` service; the per-parameter ``set_parameters`` service validates each against the
+current configuration).
 """
 from __future__ import annotations
 
@@ -52,6 +59,7 @@ __all__ = ["SimNode", "SimSettings", "plant_config", "main"]
 
 _DIAG_PERIOD = 1.0      # s between /diagnostics messages
 _ANNOUNCE_PERIOD = 0.5  # s between repeats of the unanswered lockstep sample 0
+_MISSED_ERROR = 0.10    # share of missed realtime periods in a second that is an ERROR, not a WARN
 
 
 @dataclass(frozen=True)
@@ -133,7 +141,7 @@ class SimNode(Node):
         self._last_msg: JointState | None = None
         self._answered = False
         self._counts = dict.fromkeys(("samples", "clip_range", "clip_slew", "nonfinite", "bad_messages", "stale",
-                                      "timeouts", "late_ticks"), 0)
+                                      "timeouts", "late_ticks", "at_stop"), 0)
         self._period_counts = dict(self._counts)
         self._timed_out = False
         self._lock = threading.Lock()    # the plant is stepped by the sampler and reconfigured by the executor
@@ -219,6 +227,16 @@ class SimNode(Node):
             mode=str(get("mode")), params_file=str(get("params_file")), scenario_file=str(get("scenario_file")),
             seed=int(get("seed")), effects=tuple((n, get(f"effects.{n}")) for n in EFFECT_NAMES))
 
+    def set_parameters(self, parameter_list):
+        """All or nothing (issue 13): the whole list is validated as one resulting configuration.
+
+        rclpy's ``Node.set_parameters`` validates and applies each parameter on its own, so
+        ``[v_min=100, v_max=50]`` rejected v_min and applied v_max; here both are rejected (one result per
+        parameter, all equal).
+        """
+        result = self.set_parameters_atomically(parameter_list)
+        return [result] * len(parameter_list)
+
     def _on_set(self, params) -> SetParametersResult:
         changes = {p.name: p.value for p in params}
         for p in params:
@@ -271,6 +289,11 @@ class SimNode(Node):
                 return
         self._k += 1
         self._count("samples")
+        if r.at_stop:
+            self._count("at_stop")
+            self.get_logger().error(
+                f"stage held by its mechanical stop (applied {r.u_applied:.6g} V): the model cannot follow this "
+                "input", throttle_duration_sec=1.0)
         if r.clipped:
             if not math.isfinite(v_cmd):
                 self._count("nonfinite")
@@ -304,6 +327,7 @@ class SimNode(Node):
                 missed = int(-wait / dt)
                 self._count("late_ticks", missed)
                 due += missed * dt
+                self.get_logger().warning(f"sampler behind: {missed} period(s) skipped", throttle_duration_sec=5.0)
             try:
                 self._tick()
             except Exception as err:  # never let the sampler die silently  # noqa: BLE001
@@ -360,18 +384,26 @@ class SimNode(Node):
         s, c = self._settings, self._counts
         d = {k: c[k] - self._period_counts[k] for k in c}
         self._period_counts = dict(c)
-        problems = []
+        problems, level = [], DiagnosticStatus.OK
+        if d["at_stop"]:
+            problems.append(f"FAULT: stage at its mechanical stop in {d['at_stop']} sample(s) (input too fast for "
+                            "the model or a diverging model)")
+            level = DiagnosticStatus.ERROR
+        missed_share = d["late_ticks"] / max(1, d["late_ticks"] + d["samples"])
+        if missed_share > _MISSED_ERROR:
+            level = DiagnosticStatus.ERROR
         if d["clip_range"] or d["clip_slew"] or d["nonfinite"]:
             problems.append(f"clipping ({d['clip_range']} range, {d['clip_slew']} slew, {d['nonfinite']} "
                             f"non-finite in {_DIAG_PERIOD:g} s)")
         if self._timed_out:
             problems.append(f"command timeout: ramping to v_safe = {s.v_safe:g} V")
         if d["late_ticks"]:
-            problems.append(f"{d['late_ticks']} missed periods")
+            problems.append(f"{d['late_ticks']} missed periods ({100 * missed_share:.0f} % of the last "
+                            f"{_DIAG_PERIOD:g} s)")
         if d["bad_messages"]:
             problems.append(f"{d['bad_messages']} malformed commands")
         st = DiagnosticStatus()
-        st.level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
+        st.level = level if level != DiagnosticStatus.OK else (DiagnosticStatus.WARN if problems else level)
         st.name = "hyst_sim: stage"
         st.hardware_id = f"sim:{s.profile}"
         st.message = "; ".join(problems) if problems else (
@@ -380,7 +412,8 @@ class SimNode(Node):
                 "samples": c["samples"], "v_applied": f"{self._plant.u_applied:.6g}",
                 "clipped_range": c["clip_range"], "clipped_slew": c["clip_slew"],
                 "nonfinite_commands": c["nonfinite"], "malformed_commands": c["bad_messages"],
-                "stale_commands": c["stale"], "timeouts": c["timeouts"], "missed_periods": c["late_ticks"]}
+                "stale_commands": c["stale"], "timeouts": c["timeouts"], "missed_periods": c["late_ticks"],
+                "missed_share": f"{missed_share:.3f}", "at_stop_samples": c["at_stop"]}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()

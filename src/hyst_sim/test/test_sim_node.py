@@ -223,3 +223,59 @@ def test_console_script_exits_cleanly_on_sigterm_and_refuses_bad_parameters():
     assert len(got) >= 50 and got[-1].name == ["stage"]
     assert proc.returncode == 0
 
+
+
+def test_parameter_sets_are_all_or_nothing(rig_factory):
+    """Issue 13: set_parameters([v_min=100, v_max=50]) applied v_max; a rejected profile change left v_max = 5 V."""
+    node = rig_factory(rate=200.0).node
+    res = node.set_parameters([Parameter("v_min", value=100.0), Parameter("v_max", value=50.0)])
+    assert len(res) == 2 and not any(r.successful for r in res) and res[0].reason
+    assert (node.get_parameter("v_min").value, node.get_parameter("v_max").value) == (0.0, 150.0)
+    # a profile change that does not fit (v_safe stays at 0 V, fine; v_min 0..v_max 5 V ok, but v_max 7 V is not)
+    res = node.set_parameters([Parameter("profile", value="gma"), Parameter("v_max", value=7.0)])
+    assert not any(r.successful for r in res)
+    assert node.get_parameter("profile").value == "pea" and node.get_parameter("v_max").value == 150.0
+    assert node._settings.v_max == 150.0 and node._plant.config.v_max == 150.0
+    res = node.set_parameters([Parameter("v_min", value=10.0), Parameter("v_max", value=120.0),
+                               Parameter("v_safe", value=10.0)])
+    assert all(r.successful for r in res) and node._plant.config.v_min == 10.0
+
+
+def _status(rig, cond, timeout=15.0):
+    found = []
+
+    def check():
+        for a in rig.diags:
+            for st in a.status:
+                if st.name == "hyst_sim: stage" and cond(st):
+                    found.append(st)
+        rig.diags.clear()
+        return bool(found)
+    assert rig.spin_until(check, timeout), "no matching /diagnostics status"
+    return found[0]
+
+
+def test_stage_at_its_stop_is_a_fault_on_diagnostics(rig_factory):
+    """Issue 11: 0/150 V alternating (no slew limit) drove the sim to -724 m; now it is held and reported."""
+    rig = rig_factory(mode="lockstep", rate=1000.0, slew_max=1e8)
+    assert rig.spin_until(lambda: len(rig.states) >= 1)
+    for k in range(120):
+        last = rig.states[-1]
+        rig.send(150.0 * (k % 2), last.header.stamp)
+        assert rig.spin_until(lambda: rig.states[-1].header.stamp != last.header.stamp)
+    y = np.array([m.position[0] for m in rig.states])
+    assert np.all(np.isfinite(y)) and np.all(np.abs(y) < 1e-4)  # bounded: tens of µm, not metres
+    assert rig.node.counts["at_stop"] > 0
+    st = _status(rig, lambda s: s.level == s.ERROR)
+    assert "mechanical stop" in st.message
+
+
+def test_missed_realtime_periods_are_reported_with_their_share(rig_factory):
+    rig = rig_factory(rate=1000.0)
+    assert rig.spin_until(lambda: len(rig.states) > 5)
+    with rig.node._lock:  # stall the sampler for 0.3 s: ~300 periods missed
+        time.sleep(0.3)
+    st = _status(rig, lambda s: "missed periods" in s.message)
+    vals = {kv.key: kv.value for kv in st.values}
+    assert float(vals["missed_share"]) > 0.05 and int(vals["missed_periods"]) >= 100
+    assert st.level == st.ERROR
