@@ -1,0 +1,64 @@
+"""hyst_excite_node against the realtime sim (in one isolated context) and its start-up refusals."""
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from hyst_control.excite_node import ExciteNode  # noqa: E402
+from hyst_sim.sim_node import SimNode  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+
+def test_plays_the_excitation_on_a_realtime_stage_time_indexed_and_stops(ctx):
+    rate = 500.0
+    sim = SimNode(context=ctx, parameter_overrides=[Parameter("rate", value=rate),
+                                                     Parameter("command_timeout", value=5.0)])
+    exc = ExciteNode(context=ctx, parameter_overrides=[
+        Parameter("rate", value=rate), Parameter("parts", value="steps,triangles"), Parameter("n_steps", value=3),
+        Parameter("hold", value=0.1), Parameter("periods", value=1), Parameter("amplitudes", value=[0.5, 1.0])])
+    tester = rclpy.create_node("tester", context=ctx)
+    states, cmds = [], []
+    tester.create_subscription(JointState, "/stage/state", states.append, 1000)
+    tester.create_subscription(JointState, "/stage/command", cmds.append, 1000)
+    ex = SingleThreadedExecutor(context=ctx)
+    for n in (sim, exc, tester):
+        ex.add_node(n)
+    try:
+        end = time.monotonic() + 120
+        while not exc.done and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.01)
+        assert exc.done, "the excitation did not finish"
+        u = exc.excitation.u
+        assert np.all(u >= 0.0) and np.all(u <= 150.0)
+        assert exc.answered >= 0.5 * len(u)  # realtime: some states may be missed under load
+        # every command answers a state with its stamp and is the time-indexed excitation sample
+        t0 = exc._t_first  # noqa: SLF001
+        for c in cmds[:-1]:
+            t = c.header.stamp.sec + 1e-9 * c.header.stamp.nanosec
+            k = int(round((t - t0) * rate)) + 1
+            assert c.effort[0] == u[k]
+        assert cmds[-1].effort[0] == exc.spec.rest
+    finally:
+        ex.shutdown()
+        for n in (sim, exc, tester):
+            n.destroy_node()
+
+
+@pytest.mark.parametrize("bad", ["parts:=steps,chirp", "v_max:=200.0", "f_hi:=900.0", "profile:=xyz",
+                                 "amplitudes:=[1.5]"])
+def test_bad_start_parameter_is_one_line_and_exit_2(bad):
+    exe = str(Path(sys.executable).parent / "hyst_excite_node")
+    p = subprocess.run([exe, "--ros-args", "-p", bad], capture_output=True, text=True, timeout=120,
+                       env=dict(os.environ))
+    assert p.returncode == 2, (bad, p.stderr)
+    assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, p.stderr
