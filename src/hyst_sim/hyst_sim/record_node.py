@@ -176,6 +176,7 @@ def main(args=None) -> int:
     except SimError as err:
         print(f"hyst_bag_record: {err}", file=sys.stderr)
         return 2
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     rclpy.init(args=args)
     node = None
     try:
@@ -195,6 +196,11 @@ def main(args=None) -> int:
         rclpy.try_shutdown()
     lost = f", {node.write_errors} write error(s)" if node is not None and node.write_errors else ""
     print(f"hyst_bag_record: {writer.count} messages on {len(writer.topics)} topic(s) -> {out}{lost}")
+    if threading.current_thread() is threading.main_thread():
+        # console script: a late signal must not kill the exiting interpreter (exit -2 after a good bag);
+        # called in-process: give the caller its handlers back
+        for sig, old in previous.items():
+            signal.signal(sig, signal.SIG_IGN if args is None else old)
     return 1 if lost else 0
 
 
