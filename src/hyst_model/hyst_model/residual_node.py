@@ -289,8 +289,9 @@ class ResidualNode(Node):
 
 def main(args=None) -> int:
     """Console script ``hyst_residual_node`` (``--ros-args --params-file P``)."""
+    from rclpy.exceptions import ParameterException
     if wants_help(args, USAGE):
-        return
+        return 0
     rclpy.init(args=args)
     node = None
     try:
@@ -298,7 +299,7 @@ def main(args=None) -> int:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (HystError, ValueError) as err:
+    except (HystError, ValueError, ParameterException) as err:  # bad start parameter: one line, exit 2
         print(f"hyst_residual_node: {err}", file=sys.stderr)
         return 2
     finally:
