@@ -7,7 +7,7 @@ sim and the driver alike. The command answering the state stamped ``t`` is excit
 repeated stamp — lockstep re-announcing sample 0 — is answered with the same value). After the last sample the
 node answers once more with the rest voltage and stops (exit 0). Parameters (all fixed at start): ``profile``,
 ``rate``, ``v_min``, ``v_max``, ``slew_max``, ``parts``, ``amplitudes``, ``frequency``, ``periods``, ``n_steps``,
-``hold``, ``f_lo``, ``f_hi``, ``seconds``, ``seed`` (see :mod:`hyst_control.excitation`) and
+``hold``, ``step_rise``, ``f_lo``, ``f_hi``, ``seconds``, ``seed`` (see :mod:`hyst_control.excitation`) and
 ``wait_for_subscribers`` (no answer until ``/stage/command`` has that many subscribers: 2 with a recorder).
 """
 from __future__ import annotations
@@ -78,6 +78,7 @@ class ExciteNode(Node):
             description="fractions of the range for sines/triangles (largest: multisine, sweep)", **ro))
         for name, lo, hi, txt in (("frequency", 1e-3, 2500.0, "sine/triangle frequency (Hz)"),
                                   ("hold", 0.0, 60.0, "step hold and pause between parts (s)"),
+                                  ("step_rise", 0.0, 10.0, "raised-cosine rise time of each step (s)"),
                                   ("f_lo", 1e-3, 2500.0, "multisine/sweep lowest frequency (Hz)"),
                                   ("f_hi", 1e-3, 2500.0, "multisine/sweep highest frequency (Hz)"),
                                   ("seconds", 1e-3, 3600.0, "multisine and sweep length (s)")):
@@ -101,7 +102,8 @@ class ExciteNode(Node):
         return ExcitationSpec(
             v_min=float(g("v_min")), v_max=float(g("v_max")), slew_max=float(g("slew_max")), dt=1.0 / float(g("rate")),
             parts=parts, amplitudes=tuple(float(a) for a in g("amplitudes")), frequency=float(g("frequency")),
-            periods=int(g("periods")), n_steps=int(g("n_steps")), hold=float(g("hold")), f_lo=float(g("f_lo")),
+            periods=int(g("periods")), n_steps=int(g("n_steps")), hold=float(g("hold")),
+            step_rise=float(g("step_rise")), f_lo=float(g("f_lo")),
             f_hi=float(g("f_hi")), seconds=float(g("seconds")), seed=int(g("seed")))
 
     def _on_state(self, msg: JointState) -> None:
