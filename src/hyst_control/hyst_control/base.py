@@ -152,6 +152,7 @@ class BaseController:
         self._u_prev = math.nan
         self._r_prev = math.nan
         self._y_prev = math.nan
+        self._r_aim = math.nan   # the reference the newest measurement was aimed at (r passed one step earlier)
         self._k = 0
         self._bad_inputs = 0
         self._saturated = 0
@@ -165,6 +166,7 @@ class BaseController:
         u0 = self.limits.apply(float(u0), math.nan, self.dt)
         r0 = y0 if r0 is None or not math.isfinite(r0) else float(r0)
         self._u_prev, self._r_prev, self._y_prev, self._k = u0, r0, y0, 0
+        self._r_aim = r0
         self._on_reset(y0, u0, r0)
 
     def step(self, r_k: float, y_k: float) -> float:
@@ -182,12 +184,15 @@ class BaseController:
         if u != raw:
             self._saturated += 1
         self._commit(u)
+        self._r_aim = self._r_prev
         self._u_prev, self._r_prev, self._y_prev = u, r_k, y_k
         self._k += 1
         return u
 
     def state(self) -> dict[str, float]:
-        return {"error": self._y_prev - self._r_prev, "u": self._u_prev, "k": float(self._k),
+        # Tracking error of the newest measurement: y_{k-1} against the reference it was commanded for (r_{k-1},
+        # passed one step earlier), not against r_k, which is the target of the command just computed.
+        return {"error": self._y_prev - self._r_aim, "u": self._u_prev, "k": float(self._k),
                 "saturated": float(self._saturated), "bad_inputs": float(self._bad_inputs)}
 
     def sync_applied(self, u_applied: float) -> None:

@@ -23,8 +23,10 @@ from dataclasses import dataclass
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from hyst_model.core import PARAM_NAMES, MBWParams, pea_default
@@ -114,6 +116,9 @@ class ControllerNode(Node):
         super().__init__("hyst_controller", **kwargs)
         self._declare()
         self._settings = self._read()  # start-up values were validated by _read
+        self._unused = self._unused_model_terms()
+        if self._unused:
+            self.get_logger().warning(self._unused)
         self.scheduling = set_realtime(int(self.get_parameter("rt_priority").value))
         if self.get_parameter("rt_priority").value and self.scheduling.policy != "fifo":
             self.get_logger().warning(f"{self.scheduling.note}; running with normal scheduling")
@@ -174,6 +179,9 @@ class ControllerNode(Node):
         d("dmrac.initial", "model", ParameterDescriptor(description="initial estimates: model | cs0..cs3 (Table 5.3)"))
         m = _profile_model(self.get_parameter("profile").value)
         d("model.base", "mbw", ParameterDescriptor(description="base model of the params file (controllers need mbw)"))
+        d("model.effects", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
+            description="effects of the params file; the controllers do not compensate them yet: reported at "
+                        "start, on every change and on /diagnostics, never silently dropped"))
         d("model.dt", 0.0, ParameterDescriptor(
             description="sample period the model was identified at (s); 0 = unknown; must equal 1/rate",
             floating_point_range=_fp(0.0, 1.0)))
@@ -220,6 +228,11 @@ class ControllerNode(Node):
     def _after_set(self, params) -> None:
         old, new = self._settings, self._read()
         self._settings = new
+        if any(p.name == "model.effects" for p in params):
+            unused = self._unused_model_terms()
+            if unused and unused != self._unused:
+                self.get_logger().warning(unused)
+            self._unused = unused
         c = self._ctrl
         if c is None:
             return
@@ -347,7 +360,12 @@ class ControllerNode(Node):
             st.level, st.message = DiagnosticStatus.WARN, "waiting for /stage/state"
         else:
             st.level, st.message = DiagnosticStatus.OK, f"{self._settings.algorithm} running"
+        if self._unused:  # whatever else is going on, the dropped model terms stay visible
+            st.level = max(st.level, DiagnosticStatus.WARN)
+            st.message += f"; {self._unused}"
         vals = dict(self._n, algorithm=self._settings.algorithm)
+        if self._unused:
+            vals["unused_model_terms"] = self._unused
         if self._ctrl is not None:
             vals.update(saturated=int(self._ctrl.state().get("saturated", 0)))
         for a, m in self.tracking_summary().items():
@@ -358,6 +376,25 @@ class ControllerNode(Node):
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [st]
         self._diag_pub.publish(arr)
+
+    def _unused_model_terms(self) -> str:
+        """What the params file (or a push) says about the stage that the control laws do not use, in words.
+
+        The laws invert the base MBW only; an identified effect (creep, delay, a resonance, ...) is not
+        compensated. That must be visible: '' when nothing is dropped.
+        """
+        try:
+            effects = list(self.get_parameter("model.effects").value or [])
+        except ParameterUninitializedException:
+            effects = []
+        extra = sorted(k for k in self._parameter_overrides
+                       if k.startswith("model.") and not self.has_parameter(k))
+        if not effects and not extra:
+            return ""
+        what = f"effects {', '.join(effects)}" if effects else "effect parameters"
+        keys = f" ({', '.join(extra[:6])}{', ...' if len(extra) > 6 else ''})" if extra else ""
+        return (f"the model holds {what}{keys} that the control laws do not compensate: they use the base MBW "
+                f"only, so tracking sees these effects as disturbances")
 
     @property
     def counts(self) -> dict:
@@ -403,8 +440,9 @@ def main(args=None) -> int:
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ControlError, ValueError) as err:
-        print(f"hyst_controller_node: {err}", file=sys.stderr)
+    except (ControlError, ValueError, ParameterException) as err:
+        # a bad start-up parameter (out of its declared range, wrong type, rejected): one line, exit 2
+        print(f"hyst_controller_node: error: {err}", file=sys.stderr)
         return 2
     finally:
         if node is not None:

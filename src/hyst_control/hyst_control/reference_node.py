@@ -12,6 +12,7 @@ import math
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -109,8 +110,9 @@ def main(args=None) -> int:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ControlError, ValueError) as err:
-        print(f"hyst_reference_node: {err}", file=sys.stderr)
+    except (ControlError, ValueError, ParameterException) as err:
+        # a bad start-up parameter (out of its declared range, wrong type, rejected): one line, exit 2
+        print(f"hyst_reference_node: error: {err}", file=sys.stderr)
         return 2
     finally:
         if node is not None:

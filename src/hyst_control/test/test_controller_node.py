@@ -124,3 +124,21 @@ def test_watchdog_commands_v_safe_and_reports_error(harness):
     assert _spin_until(ex, lambda: len(got["cmd"]) > n0)
     assert math.isfinite(got["cmd"][-1].effort[0])
     assert not node._tripped  # noqa: SLF001
+
+
+def test_effects_of_a_params_file_are_reported_never_silently_dropped(harness, tmp_path):
+    """The laws use the base MBW only: an identified effect is named in the log and on /diagnostics."""
+    p = tmp_path / "stage.yaml"
+    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      effects: [creep, delay]\n"
+                 "      zeta1: 0.45\n      y_scale: 5.0e-06\n      dt: 0.001\n"
+                 "      creep:\n        gain: 0.01\n        tilt: 0.0\n      delay:\n        tau: 0.002\n")
+    node, peer, ex, pub, got = harness("--params-file", str(p))
+    assert "creep, delay" in node._unused and "model.creep.gain" in node._unused  # noqa: SLF001
+    assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
+    pub.publish(_state(0, 10e-6, 50.0))
+    assert _spin_until(ex, lambda: any(s.level >= DiagnosticStatus.WARN and "do not compensate" in s.message
+                                       for d in got["diag"] for s in d.status), 5.0)
+    plain = tmp_path / "plain.yaml"
+    plain.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      zeta1: 0.45\n")
+    node2, *_ = harness("--params-file", str(plain))
+    assert node2._unused == ""  # noqa: SLF001

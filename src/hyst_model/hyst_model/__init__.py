@@ -3,17 +3,12 @@
 Layers: :mod:`hyst_model.core` (numerical, numpy/numba only) · :mod:`hyst_model.io` (bags, CSV, params files)
 · ``*_node.py`` modules (thin rclpy nodes; the only place rclpy is imported).
 """
-# Lazy (PEP 562): ``hyst --help`` and an immediate argument error must not pay for numpy/numba, and the
-# entry point sets single-threaded BLAS before numpy loads (hyst_model.runtime.single_threaded_blas).
-_LAZY = {"MBWParams": "core", "mbw_simulate": "core", "mbw_step": "core", "pea_default": "core",
-         "Model": "model", "MBWModel": "model", "Param": "model"}
+from .blas import single_thread_blas
 
+# Before anything loads numpy (and with it BLAS): hyst's own processes use one BLAS thread (see .blas).
+single_thread_blas()
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        import importlib
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+from .core import MBWParams, mbw_simulate, mbw_step, pea_default  # noqa: E402  (after the BLAS setting on purpose)
+from .model import MBWModel, Model, Param  # noqa: E402
 
-
-__all__ = ["MBWParams", "mbw_simulate", "mbw_step", "pea_default", "Model", "MBWModel", "Param"]
+__all__ = ["single_thread_blas", "MBWParams", "mbw_simulate", "mbw_step", "pea_default", "Model", "MBWModel", "Param"]

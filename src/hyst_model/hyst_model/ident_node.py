@@ -8,14 +8,8 @@ parameter services), then
 * the params file ``params_file`` is written atomically (an existing file the node did not write itself is only
   replaced with ``overwrite: true``),
 * a JSON summary is published on ``~/fit_result`` (``std_msgs/String``, transient local),
-* with ``controller_node`` set (e.g. ``/hyst_controller``) every ``model.*`` parameter — the MBW parameters,
-  ``offset``, the scales ``u_scale``/``y_scale`` and the sample period ``model.dt`` (the controller refuses a model
-  identified at another rate) — is pushed to that node through its parameter service
-  (``AsyncParameterClient.set_parameters_atomically``: all or nothing).
-
-Bags are regularised before fitting (:func:`hyst_model.io.record.regularise`): lockstep duplicate stamps are
-collapsed, missed periods handled as the ``gaps`` parameter says (``auto`` | ``bridge`` | ``longest`` |
-``refuse``); what was changed is logged and listed under ``notes`` in the summary.
+* with ``controller_node`` set (e.g. ``/hyst_controller``) the ``model.*`` parameters are pushed to that node
+  through its parameter service (``AsyncParameterClient.set_parameters_atomically``: all or nothing).
 
 A bad bag is logged and skipped; the node carries on. Parameters are declared with descriptors and ranges,
 validated in the on-set callback and applied by swapping a frozen config.
@@ -31,7 +25,7 @@ from pathlib import Path
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -46,7 +40,6 @@ from .runtime import wants_help
 __all__ = ["IdentConfig", "IdentNode", "main", "fit_bag", "controller_parameters"]
 
 _METHODS = ("fast", "epso", "lsq")
-_GAPS = ("auto", "bridge", "longest", "refuse")
 
 USAGE = (
     'hyst_ident_node: refit the stage model from rosbag2 recordings (given bags or a watched folder), write the\n'
@@ -81,8 +74,9 @@ class IdentConfig:
         from .models import BASE_MODELS
         if self.model not in BASE_MODELS:
             raise ValueError(f"model must be one of {', '.join(sorted(BASE_MODELS))}")
-        if self.gaps not in _GAPS:
-            raise ValueError(f"gaps must be one of {', '.join(_GAPS)}, got {self.gaps!r}")
+        from .io.regular import GAP_POLICIES
+        if self.gaps not in GAP_POLICIES:
+            raise ValueError(f"gaps must be one of {', '.join(GAP_POLICIES)}")
         if self.method not in _METHODS:
             raise ValueError(f"method must be one of {', '.join(_METHODS)}")
         if self.watch_dir and not Path(self.watch_dir).is_dir():
@@ -99,27 +93,27 @@ class IdentConfig:
 def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     """Fit ``cfg.model`` (+ effects) to one bag; returns ``(summary, model, result, dt)``. Pure: no ROS."""
     from .identify import fit
-    from .io import read_state_bag
+    from .io import read_state_bag, regularise
     from .models import data_config
     from .spec import build_model
-    from .io.record import regularise
+    # Lockstep bags repeat sample 0, realtime bags miss periods: made regular as `hyst fit --gaps` does.
     rec, notes = regularise(read_state_bag(path, cfg.topic), cfg.gaps)
-    rec = rec.check()
+    rec.check()
     config = dict(data_config(rec.u, rec.y), dt=rec.dt)
     model = build_model(cfg.model, cfg.effects, config)
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed,
               split=cfg.val_fraction if cfg.val_fraction > 0 else None)
     summary = {"bag": str(path), "model": cfg.model, "effects": list(cfg.effects), "method": cfg.method,
                "rmse": res.rmse, "rmse_train": res.rmse_train, "seconds": res.seconds, "samples": len(rec),
-               "params": res.params, "dt": rec.dt, "gaps": cfg.gaps, "notes": list(notes)}
+               "params": res.params, "dt": rec.dt, "data_notes": notes}
     return summary, model, res, rec.dt
 
 
-def controller_parameters(model, theta, dt: float | None = None) -> list[Parameter]:
-    """Every ``model.*`` parameter the controller node declares (MBW only; BW is MBW with zero rate terms).
+def controller_parameters(model, theta, dt: float) -> list[Parameter]:
+    """``model.*`` parameters the controller node declares (MBW only; BW is MBW with zero rate terms).
 
-    ``dt`` (s), the sample period of the fitted data, is pushed as ``model.dt`` so that the controller can refuse
-    a model identified at another rate (default: the model's own ``dt`` config).
+    Every one is pushed, ``model.dt`` and the scales included, so the controller can refuse a model identified
+    at another sample rate (the MBW recursion is per sample) instead of silently running it at its own rate.
     """
     base = getattr(model, "base", model)
     if getattr(model, "effects", None):
@@ -128,16 +122,11 @@ def controller_parameters(model, theta, dt: float | None = None) -> list[Paramet
         raise HystError(f"the controller inverts MBW; a {base.name!r} model cannot be pushed")
     values = dict(zip(PARAM_NAMES, (0.0,) * 8))
     values.update(model.unpack(theta))
-    cfg = model.config()
-    values.update({k: float(v) for k, v in cfg.items() if k in ("u_scale", "y_scale")})
-    missing = [k for k in ("u_scale", "y_scale") if k not in values]
-    dt = float(dt if dt is not None else cfg.get("dt", 0.0) or 0.0)
-    if missing or not dt > 0:
-        raise HystError(f"the model lacks {', '.join(missing) or 'a positive dt'}; the controller needs the scales "
-                        "and the sample period")
-    out = [Parameter("model.base", Parameter.Type.STRING, "mbw"), Parameter("model.dt", Parameter.Type.DOUBLE, dt)]
+    values.update({k: float(v) for k, v in model.config().items() if k in ("u_scale", "y_scale")})
+    out = [Parameter("model.base", Parameter.Type.STRING, "mbw")]
     out += [Parameter(f"model.{k}", Parameter.Type.DOUBLE, float(values[k]))
             for k in PARAM_NAMES + ("offset", "u_scale", "y_scale")]
+    out.append(Parameter("model.dt", Parameter.Type.DOUBLE, float(dt)))
     return out
 
 
@@ -197,11 +186,11 @@ class IdentNode(Node):
             description="replace a params file that existed before this node wrote it"))
         d("controller_node", "", ParameterDescriptor(
             description="push model.* to this node after each fit, e.g. /hyst_controller ('' = off)"))
-        d("gaps", "auto", ParameterDescriptor(
-            description="missed sample periods in a bag: auto (bridge short gaps, keep the longest part between "
-                        "long ones) | bridge | longest | refuse; lockstep duplicate stamps are always collapsed"))
         d("push_timeout", 5.0, ParameterDescriptor(description="wait this long for the controller's parameter "
                                                                "service (s)", floating_point_range=_fp(0.1, 600)))
+        d("gaps", "auto", ParameterDescriptor(
+            description="irregular stamps in a bag: auto (collapse lockstep repeats, bridge up to 10 missed periods "
+                        "with the input held, else keep the longest segment) | bridge | longest | refuse"))
 
     def _read(self, changes: dict | None = None) -> IdentConfig:
         def get(name):
@@ -289,8 +278,6 @@ class IdentNode(Node):
 
     def _deliver(self, summary: dict, model, res, dt: float) -> None:
         cfg = self._cfg
-        for note in summary.get("notes", ()):
-            self.get_logger().info(f"{summary['bag']}: {note}")
         self.get_logger().info(f"{summary['bag']}: validation RMSE {res.rmse * 1e9:.2f} nm "
                                f"(train {res.rmse_train * 1e9:.2f} nm, {res.seconds:.2f} s)")
         if cfg.params_file:
@@ -306,10 +293,10 @@ class IdentNode(Node):
                 self.get_logger().error(f"not written: {err} (set overwrite:=true to replace it)")
                 summary["params_file_error"] = str(err)
         if cfg.controller_node:
-            self._push(model, res.theta, summary, dt)
+            self._push(model, res.theta, dt, summary)
         self._publish(summary)
 
-    def _push(self, model, theta, summary: dict, dt: float) -> None:
+    def _push(self, model, theta, dt: float, summary: dict) -> None:
         cfg = self._cfg
         try:
             params = controller_parameters(model, theta, dt)
@@ -360,29 +347,28 @@ class IdentNode(Node):
         return super().destroy_node()
 
 
-def main(args=None) -> int:
-    """Console script ``hyst_ident_node``; bad start parameters: one line on stderr, exit 2 (issue 13)."""
-    import sys
-
-    from rclpy.exceptions import ParameterException
+def main(args=None) -> None:
     if wants_help(args, USAGE):
-        return 0
+        return
     rclpy.init(args=args)
     node = None
+    code = 0
     try:
         node = IdentNode()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (HystError, ParameterException) as err:
+    except (HystError, ParameterException) as err:  # bad start-up parameters: one line, exit 2
+        import sys
         print(f"hyst_ident_node: error: {err}", file=sys.stderr)
-        return 2
+        code = 2
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    if code:
+        raise SystemExit(code)
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    main()

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -289,9 +289,8 @@ class ResidualNode(Node):
 
 def main(args=None) -> int:
     """Console script ``hyst_residual_node`` (``--ros-args --params-file P``)."""
-    from rclpy.exceptions import ParameterException
     if wants_help(args, USAGE):
-        return 0
+        return
     rclpy.init(args=args)
     node = None
     try:
@@ -299,8 +298,8 @@ def main(args=None) -> int:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (HystError, ValueError, ParameterException) as err:  # bad start parameter: one line, exit 2
-        print(f"hyst_residual_node: {err}", file=sys.stderr)
+    except (HystError, ValueError, ParameterException) as err:  # bad start-up parameters: one line, exit 2
+        print(f"hyst_residual_node: error: {err}", file=sys.stderr)
         return 2
     finally:
         if node is not None:

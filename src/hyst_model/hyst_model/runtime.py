@@ -20,38 +20,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-__all__ = ["Scheduling", "set_realtime", "RT_PRIORITY_MAX", "own_args", "wants_help", "single_threaded_blas"]
-
-#: Thread-count variables of the BLAS/OpenMP back ends numpy and scipy may load.
-BLAS_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
-                    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
-
-
-def single_threaded_blas() -> dict[str, str]:
-    """Run BLAS single-threaded in this process unless the user chose otherwise.
-
-    hyst's matrices are tiny (a few dozen states): a thread pool costs more than it gains and, under load,
-    makes each ``expm`` up to 100x slower. Each variable the user has set is left alone. Call it before numpy
-    is imported (the ``hyst`` entry point and the nodes' ``main`` do); if numpy is already loaded, the pools are
-    limited through ``threadpoolctl`` when it is installed.
-
-    Returns
-    -------
-    dict
-        The variables this call set.
-    """
-    import sys
-    done = {}
-    for var in BLAS_THREAD_VARS:
-        if var not in os.environ:
-            os.environ[var] = done[var] = "1"
-    if done and "numpy" in sys.modules:
-        try:
-            from threadpoolctl import threadpool_limits
-        except ImportError:  # optional: without it the env vars act on the next process only
-            return done
-        threadpool_limits(limits=1)
-    return done
+__all__ = ["Scheduling", "set_realtime", "RT_PRIORITY_MAX", "own_args", "wants_help"]
 
 #: Highest priority offered: 99 is left to the kernel's own watchdog threads.
 RT_PRIORITY_MAX = 98

@@ -72,3 +72,42 @@ def test_missing_file_and_cli_exit_code(tmp_path, capsys):
     rc = main(["diagnose", str(data), "--effect-module", str(bad), "--quiet"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "import failed: ValueError: nope" in err[0]
+
+
+def test_readme_example_works_in_fit_and_simulate_and_a_builtin_name_is_refused(tmp_path, capsys):
+    """`hyst fit ... --effects hum --effect-module docs/examples/my_effect.py` (README) and `hyst simulate` on its
+    params file; a user effect named like a built-in is refused instead of replacing it."""
+    from hyst_model.core import pea_default
+    from hyst_model.io import write_csv
+    try:
+        t = np.arange(4000) * 5e-4
+        u = 75 + 60 * np.sin(2 * np.pi * 2 * t)
+        y = pea_default().simulate(u) + 3e-9 * np.cos(2 * np.pi * 50 * t)
+        write_csv(tmp_path / "r.csv", {"t": t, "u": u, "y": y})
+        write_csv(tmp_path / "u.csv", {"t": t, "u": u})
+        p = tmp_path / "p.yaml"
+        assert main(["fit", str(tmp_path / "r.csv"), "--effects", "hum", "--effect-module", str(EXAMPLE),
+                     "--out", str(p), "--quiet"]) == 0
+        EFFECTS.pop("hum", None)                       # a fresh process would not know it either
+        assert main(["simulate", "--params", str(p), "--input", str(tmp_path / "u.csv"),
+                     "--out", str(tmp_path / "y.csv")]) == 2
+        assert "hum" in capsys.readouterr().err
+        assert main(["simulate", "--params", str(p), "--input", str(tmp_path / "u.csv"),
+                     "--out", str(tmp_path / "y.csv"), "--effect-module", str(EXAMPLE)]) == 0
+    finally:
+        EFFECTS.pop("hum", None)
+    clash = tmp_path / "clash.py"
+    clash.write_text(textwrap.dedent('''
+        from hyst_model.effects import Effect
+        class MyCreep(Effect):
+            name = "creep"
+            kind = "output"
+            def params(self):
+                return ()
+            def output(self, theta, t, u, y):
+                return y
+        '''))
+    builtin = EFFECTS["creep"]
+    with pytest.raises(EffectError, match="'creep', a built-in effect"):
+        load_effect_module(clash)
+    assert EFFECTS["creep"] is builtin

@@ -35,8 +35,7 @@ class FakeController(Node):
     def __init__(self, context):
         super().__init__("fake_ctrl", context=context)
         self.declare_parameter("model.base", "mbw")
-        self.declare_parameter("model.dt", 0.0)
-        for k in KEYS:
+        for k in KEYS + ("dt",):
             self.declare_parameter(f"model.{k}", 0.0)
         self.add_on_set_parameters_callback(self._on_set)
 
@@ -74,7 +73,7 @@ def test_fits_bag_writes_params_and_pushes_to_controller(tmp_path, ctx):
             v = spec.values.get(k, spec.config.get(k))
             assert ctrl.get_parameter(f"model.{k}").value == pytest.approx(v, rel=1e-12, abs=1e-300)
         g = lambda k: ctrl.get_parameter(f"model.{k}").value  # noqa: E731
-        assert g("dt") == pytest.approx(5e-4, rel=1e-9)  # the sample period travels with the model
+        assert g("dt") == pytest.approx(5e-4, rel=1e-9)     # the rate the model was identified at is pushed too
         # the small-signal gain ζ1·y_scale/u_scale (m/V) is scale-free and must match the truth
         assert g("zeta1") * g("y_scale") / g("u_scale") == pytest.approx(TRUE.zeta1 * TRUE.y_scale / TRUE.u_scale,
                                                                          rel=0.01)
@@ -149,55 +148,22 @@ def test_params_file_loads_through_ros_params_file(tmp_path, ctx):
         rclpy.try_shutdown(context=c)
 
 
-def _irregular_bag(path, kind, n=2400):
-    """A lockstep bag (sample 0 re-announced 3 times) or a realtime bag with missed periods."""
-    rng = np.random.default_rng(4)
+def test_lockstep_and_gappy_bags_are_fitted_as_they_are(tmp_path):
+    """Sample 0 repeated (lockstep) and two missed periods (realtime): fitted, with what was done reported."""
+    from hyst_model.ident_node import IdentConfig, fit_bag
+    rng = np.random.default_rng(3)
+    n = 2000
     t = np.arange(n) * 5e-4
     u = 75 + 50 * np.sin(2 * np.pi * 3 * t) + 15 * np.sin(2 * np.pi * 11 * t)
     y = TRUE.simulate(u) + rng.normal(0, 2e-9, n)
-    if kind == "lockstep":
-        idx = np.r_[[0, 0, 0], np.arange(n)]
-    else:  # two missed stretches of 3 periods and one of 200
-        keep = np.ones(n, bool)
-        keep[[500, 501, 502, 900, 901, 902]] = False
-        keep[1500:1700] = False
-        idx = np.flatnonzero(keep)
-    return write_state_bag(path, t[idx], u[idx], y[idx])
+    idx = np.r_[0, 0, 0, np.arange(0, 900), np.arange(902, n)]
+    bag = write_state_bag(tmp_path / "lockstep", t[idx], u[idx], y[idx])
+    summary, _, res, dt = fit_bag(str(bag), IdentConfig())
+    assert summary["samples"] == n and dt == pytest.approx(5e-4)
+    assert any("collapsed 3" in s for s in summary["data_notes"])
+    assert any("bridged 1 gap" in s for s in summary["data_notes"])
+    assert res.rmse < 5e-9
+    from hyst_model.errors import DataError
+    with pytest.raises(DataError, match="--gaps auto"):
+        fit_bag(str(bag), IdentConfig(gaps="refuse"))
 
-
-@pytest.mark.parametrize("kind,gaps,ok", [("lockstep", "refuse", True), ("gappy", "auto", True),
-                                          ("gappy", "bridge", None), ("gappy", "refuse", False)])
-def test_lockstep_and_gappy_bags_are_regularised_as_the_gaps_parameter_says(tmp_path, ctx, kind, gaps, ok):
-    bag = _irregular_bag(tmp_path / kind, kind)
-    node = IdentNode(context=ctx, parameter_overrides=[
-        Parameter("bags", Parameter.Type.STRING_ARRAY, [str(bag)]),
-        Parameter("gaps", Parameter.Type.STRING, gaps)])
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    try:
-        assert _spin_until(ex, lambda: len(node.results) >= 1)
-        r = node.results[0]
-        if ok:
-            assert r["rmse"] < 5e-9 and r["dt"] == pytest.approx(5e-4) and r["notes"], r
-        elif ok is None:  # bridging the 200-period gap holds u and interpolates y: it runs and says so
-            assert any("bridged 3 gap" in n for n in r["notes"]), r
-        else:
-            assert "error" in r and "gap" in r["error"].lower(), r
-        assert not node.set_parameters([Parameter("gaps", Parameter.Type.STRING, "magic")])[0].successful
-    finally:
-        ex.shutdown()
-        node.destroy_node()
-
-
-def test_bad_start_parameter_is_one_line_and_exit_2(tmp_path):
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-    exe = str(Path(sys.executable).parent / "hyst_ident_node")
-    for bad in ("watch_dir:=/nope", "gaps:=sometimes", "poll_period:=-1.0"):
-        p = subprocess.run([exe, "--ros-args", "-p", bad], capture_output=True, text=True, timeout=120,
-                           env=dict(os.environ))
-        assert p.returncode == 2, (bad, p.returncode, p.stderr)
-        lines = p.stderr.strip().splitlines()
-        assert len(lines) == 1 and "Traceback" not in p.stderr and lines[0].startswith("hyst_ident_node"), p.stderr

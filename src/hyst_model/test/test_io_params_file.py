@@ -79,6 +79,26 @@ def test_flatten_nest_inverse():
     assert nest(flatten(d)) == d and flatten(d)["creep.tau.a"] == 3.0
 
 
+def test_garbage_missing_scales_and_bad_dt_are_one_clear_error(tmp_path):
+    from hyst_model.errors import ParamsError
+    from hyst_model.io import read_params
+    bad = tmp_path / "garbage.bin"
+    bad.write_bytes(bytes(range(256)) * 4)
+    with pytest.raises(ParamsError, match="cannot read params file"):
+        read_params(bad)
+    from hyst_model.core import pea_default
+    vals = "".join(f"      {k}: {v!r}\n" for k, v in pea_default().to_dict().items()
+                   if k not in ("u_scale", "y_scale", "offset"))
+    base = "/**:\n  ros__parameters:\n    model:\n      base: mbw\n      offset: 0.0\n" + vals
+    p = tmp_path / "noscale.yaml"
+    p.write_text(base + "      y_scale: 5.0e-06\n")
+    with pytest.raises(ParamsError, match="model.u_scale missing"):
+        read_params(p)
+    p.write_text(base + "      u_scale: 15.0\n      y_scale: 5.0e-06\n      dt: 0\n")
+    with pytest.raises(ParamsError, match="model.dt must be a positive number"):
+        read_params(p)
+
+
 @pytest.mark.parametrize("force", [False, True])
 def test_written_with_the_user_umask_also_after_force(tmp_path, force):
     _, _, spec = _spec()
@@ -105,28 +125,13 @@ def test_unwritable_targets_refused_before_work(tmp_path, target, match):
         write_params(target.format(tmp=tmp_path), spec, force=True)
 
 
-@pytest.mark.parametrize("drop,extra,match", [
-    ("u_scale", {}, "model.u_scale missing"),
-    ("y_scale", {}, "model.y_scale missing"),
-    (None, {"dt": 0.0}, "model.dt must be a positive number"),
-])
-def test_scales_required_and_dt_positive(tmp_path, drop, extra, match):
-    import yaml
-    _, _, spec = _spec()
-    p = tmp_path / "p.yaml"
-    write_params(p, spec)
-    doc = yaml.safe_load(p.read_text())
-    m = doc["/**"]["ros__parameters"]["model"]
-    m.pop(drop, None)
-    m.update(extra)
-    p.write_text(yaml.safe_dump(doc))
-    with pytest.raises(ParamsError, match=match):
-        read_params(p)
-
-
-def test_binary_params_one_line(tmp_path):
-    p = tmp_path / "g.bin"
-    p.write_bytes(bytes(range(256)) * 4)
-    with pytest.raises(ParamsError, match="cannot read params file") as ei:
-        read_params(p)
-    assert "\n" not in str(ei.value)
+def test_diagnose_refuses_an_existing_out_before_any_work(tmp_path, capsys):
+    """`hyst diagnose DATA --out P` with P present: refused at once (it used to be after minutes of fitting)."""
+    from hyst_model.cli.main import main
+    from hyst_model.io import write_csv
+    t = np.arange(2000) * 5e-4
+    write_csv(tmp_path / "r.csv", {"t": t, "u": 75 + 60 * np.sin(t), "y": 1e-6 * np.sin(t)})
+    (tmp_path / "p.yaml").write_text("keep me\n")
+    assert main(["diagnose", str(tmp_path / "r.csv"), "--out", str(tmp_path / "p.yaml"), "--quiet"]) == 2
+    assert "exists; use --force" in capsys.readouterr().err
+    assert (tmp_path / "p.yaml").read_text() == "keep me\n"

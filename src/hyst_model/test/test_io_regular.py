@@ -1,71 +1,104 @@
-"""regularise: lockstep duplicates collapsed, realtime missed periods bridged or split (issue 11)."""
+"""Rig records are fit as they come: repeated lockstep stamps collapsed, missed periods bridged or cut, reported."""
+from __future__ import annotations
+
+import json
+
 import numpy as np
 import pytest
 
+from hyst_model.cli.main import main
+from hyst_model.core import pea_default
 from hyst_model.errors import DataError
-from hyst_model.io.record import Record, regularise
+from hyst_model.io import load_record, regularise, write_state_bag
+from hyst_model.io.record import Record
 
-DT = 5e-4
+DT = 1e-3
 
 
-def _rec(n=400, seed=0):
+def _stage(n: int = 4000, seed: int = 0):
+    """A seeded record from the one MBW recursion (the embedded PEA stage) with 2 nm noise."""
     rng = np.random.default_rng(seed)
-    t = np.arange(n) * DT
-    return Record(t, rng.uniform(0, 100, n), np.sin(2 * np.pi * 5 * t) * 1e-6, {"source": "x.mcap"})
+    t = DT * np.arange(n)
+    u = 75.0 + 60.0 * np.sin(2 * np.pi * 2.0 * t) + 10.0 * np.sin(2 * np.pi * 7.0 * t)
+    return t, u, pea_default().simulate(u) + 2e-9 * rng.standard_normal(n)
 
 
-def _drop(rec, idx):
-    keep = np.ones(len(rec), bool)
-    keep[idx] = False
-    return Record(rec.t[keep], rec.u[keep], rec.y[keep], dict(rec.meta))
+def _lockstep_copies(t, u, y, copies: int = 4):
+    """Sample 0 published ``copies`` times with the same stamp, as the lockstep sim does until answered."""
+    idx = np.r_[np.zeros(copies - 1, dtype=int), np.arange(t.size)]
+    return t[idx], u[idx], y[idx]
 
 
-def test_lockstep_duplicates_collapsed_and_reported():
-    r = _rec()
-    t = np.r_[np.zeros(7), r.t]
-    u = np.r_[np.full(7, r.u[0]), r.u]
-    y = np.r_[np.full(7, r.y[0]), r.y]
-    out, notes = regularise(Record(t, u, y, {"source": "b"}))
-    out.check()
-    assert len(out) == len(r) and out.meta["regularised"]["duplicates"] == 7
-    assert any("collapsed 7" in n for n in notes)
+def test_repeated_stamps_collapse_to_one_sample():
+    t, u, y = _stage(200)
+    rec, notes = regularise(Record(*_lockstep_copies(t, u, y)))
+    np.testing.assert_array_equal(rec.t, t)
+    np.testing.assert_array_equal(rec.y, y)
+    assert notes == ["collapsed 3 repeated time stamp(s) (identical copies)"]
+    with pytest.raises(DataError, match="not strictly increasing.*--gaps auto"):
+        regularise(Record(*_lockstep_copies(t, u, y)), "refuse")
 
 
-def test_short_gaps_bridged_u_held_y_interpolated():
-    r = _rec()
-    g = _drop(r, [100, 101, 250])
-    out, notes = regularise(g, "auto")
-    out.check()
-    assert len(out) == len(r) and out.meta["regularised"]["bridged_samples"] == 3
-    assert out.u[100] == out.u[101] == r.u[99]  # held
-    np.testing.assert_allclose(out.y, r.y, atol=1e-8)  # smooth y interpolated closely
-    assert any("bridged 2 gap" in n for n in notes)
+def test_short_gaps_are_bridged_with_the_input_held():
+    t, u, y = _stage(300)
+    keep = np.r_[0:100, 103:200, 207:300]          # 3 and 7 periods missed
+    rec, notes = regularise(Record(t[keep], u[keep], y[keep]), "bridge")
+    assert len(rec) == 300 and np.allclose(np.diff(rec.t), DT)
+    assert rec.meta["bridged"] == [100, 101, 102, 200, 201, 202, 203, 204, 205, 206]
+    np.testing.assert_array_equal(rec.u[100:103], u[99])        # held, as the DAC holds it
+    np.testing.assert_allclose(rec.y[100:103], np.interp(t[100:103], t[[99, 103]], y[[99, 103]]))
+    assert "bridged 2 gap(s)" in notes[0] and "10 samples, longest 7" in notes[0]
+    rec.check()
 
 
-def test_long_gap_split_keeps_longest_and_short_ones_bridged():
-    r = _rec()
-    g = _drop(r, list(range(100, 150)) + [300])
-    out, notes = regularise(g, "auto")
-    out.check()
-    assert out.t[0] == pytest.approx(150 * DT) and len(out) == 250
-    assert any("long gap" in n for n in notes)
-    full, _ = regularise(g, "bridge")
-    assert len(full.check()) == len(r)
-    lon, _ = regularise(g, "longest")
-    assert len(lon.check()) == 150  # 150..299
+def test_long_gaps_cut_to_the_longest_segment_or_refuse():
+    t, u, y = _stage(1000)
+    keep = np.r_[0:300, 302:500, 600:1000]        # a 2-period gap (bridged) and a 100-period gap (cut)
+    r = Record(t[keep], u[keep], y[keep])
+    rec, notes = regularise(r, "auto")
+    assert len(rec) == 500 and rec.meta["bridged"] == [300, 301]       # 0..499 with the bridge, then cut
+    assert any("longer than 10 periods" in n for n in notes)
+    with pytest.raises(DataError, match="cannot be bridged; use --gaps longest"):
+        regularise(r, "bridge")
+    rec, _ = regularise(r, "longest")
+    assert len(rec) == 400
 
 
-def test_refuse_suggests_the_option_and_backwards_stamps_refused():
-    g = _drop(_rec(), [100])
-    with pytest.raises(DataError, match="--gaps auto"):
-        regularise(g, "refuse")
-    r = _rec()
-    r.t[50] = r.t[10]
-    with pytest.raises(DataError, match="backwards"):
-        regularise(r)
+def test_time_running_backwards_stays_an_error():
+    t, u, y = _stage(100)
+    t = t.copy()
+    t[50] = t[40]
+    with pytest.raises(DataError, match="time runs backwards"):
+        regularise(Record(t, u, y))
 
 
-def test_regular_record_unchanged():
-    r = _rec()
-    out, notes = regularise(r)
-    assert notes == [] and np.array_equal(out.t, r.t)
+def test_bridging_is_exact_when_the_stage_held_the_input():
+    """Missed periods of a stage whose DAC held the voltage: the bridged record fits to the noise floor."""
+    t, u, _ = _stage(3000)
+    rng = np.random.default_rng(5)
+    missed = np.sort(rng.choice(np.arange(100, 2900), 40, replace=False))
+    u_held = u.copy()
+    for k in missed:                                   # in order, so runs of missed samples hold one value
+        u_held[k] = u_held[k - 1]
+    y = pea_default().simulate(u_held)
+    keep = np.setdiff1d(np.arange(3000), missed)
+    rec, _ = regularise(Record(t[keep], u_held[keep], y[keep]))
+    np.testing.assert_array_equal(rec.u, u_held)
+    np.testing.assert_allclose(pea_default().simulate(rec.u), y, rtol=0, atol=1e-15)
+
+
+def test_hyst_fit_reads_a_lockstep_bag_with_missed_periods_as_it_is(tmp_path, capsys):
+    t, u, y = _stage(4000)
+    keep = np.r_[0:1500, 1502:4000]
+    tt, uu, yy = _lockstep_copies(t[keep], u[keep], y[keep])
+    bag = write_state_bag(tmp_path / "run", tt, uu, yy)
+    with pytest.raises(DataError):
+        load_record(bag).check()
+    assert main(["fit", str(bag), "--json", "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    obj = json.loads(out)
+    assert obj["samples"] == 4000 and any("collapsed 3" in n for n in obj["data_notes"])
+    assert "bridged 1 gap(s)" in err
+    assert obj["rmse"] < 20e-9                      # the noise is 2 nm: the bridge did not spoil the fit
+    assert main(["fit", str(bag), "--gaps", "refuse", "--quiet"]) == 2
+    assert "--gaps auto" in capsys.readouterr().err

@@ -171,17 +171,3 @@ def test_bad_states_are_ignored_and_gaps_restart(tmp_path, rigs):
     assert rig.spin_until(lambda: len(rig.pred) >= 81)
     rig.spin_until(lambda: False, timeout=0.1)
     assert len(rig.res) == 80
-
-
-@pytest.mark.parametrize("bad", ["history:=-5.0", "batch:=0", "model.base:=zzz"])
-def test_bad_start_parameter_is_one_line_and_exit_2(bad):
-    """Issue 13: one behaviour for all nodes (an out-of-range declared parameter printed a traceback)."""
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-    exe = str(Path(sys.executable).parent / "hyst_residual_node")
-    p = subprocess.run([exe, "--ros-args", "-p", bad], capture_output=True, text=True, timeout=120,
-                       env=dict(os.environ))
-    assert p.returncode == 2, (bad, p.stderr)
-    assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, p.stderr

@@ -18,18 +18,18 @@ emulator and the diagnosis tests all build on this API::
 Signal chain per sample ``k`` (see :mod:`hyst_sim.truth_effects` for each effect)::
 
     u_cmd ─ clip to [v_min, v_max] and slew_max·dt (NaN/inf hold the last value) ─▶ u_applied
-    u_applied ─ delay ─▶ MBW(u/u_scale) · y_scale + offset ─ asymmetry ─ creep ─ saturation ─ dynamics ─▶ x
+    u_applied ─ delay ─▶ MBW(u/u_scale) held within the end stops · y_scale + offset ─ asymmetry ─ creep ─ saturation ─ dynamics ─▶ x
     x ─ + drift ─ + noise ─ quantisation ─▶ y (what the sensor reports)
-
-The stage is physically bounded: the true position ``x`` (and the MBW state with it) cannot pass the mechanical
-stops ``stroke ± stop_margin·span``. An input the model cannot follow (e.g. 0/150 V alternating at 1 kHz makes
-the MBW recursion diverge) leaves the stage at a stop, flagged :data:`AT_STOP`, instead of a number that runs away
-(−724 m after 80 samples, then a wrapped −1.8e10 m reading); the sim node reports it as a fault.
 
 With every effect off, ``y`` equals :meth:`hyst_model.core.MBWParams.simulate` of the applied voltage exactly
 (the plant calls :func:`hyst_model.core.mbw_step`; there is no second MBW implementation). The MBW parameters
 are per plant sample; ``mbw_substeps`` > 1 runs the recursion that many times per sample with the input held
 (a model identified at ``dt/mbw_substeps``, e.g. a 2 kHz fit driven by a 1 kHz sim).
+
+End stops: the stage's travel ends :data:`STOP_MARGIN` of the stroke beyond its rest positions at ``v_min``
+and ``v_max``. An input far from anything the model was identified on (e.g. 0/150 V alternating every sample)
+can drive the MBW state without bound; the stop holds it there and flags the sample (:data:`AT_STOP`), which
+the sim node reports as a fault on ``/diagnostics``.
 """
 from __future__ import annotations
 
@@ -44,18 +44,23 @@ from hyst_model.core import MBWParams, mbw_rest_state
 
 from .errors import ConfigError, SimError
 from .plant_kernel import (F_ASYM, F_CREEP, F_DA, F_DELAY, F_DQ, F_DR, F_DT, F_DW, F_DYN, F_HALF, F_NOISE, F_OFF,
-                           F_QUANT, F_SAT, F_SATHI, F_SATLO, F_SATW, F_STEP, F_STOPHI, F_STOPLO, F_SUB, F_US,
-                           F_VMAX, F_VMIN, F_XMID, F_YS, N_F, S_DIDX, S_DT_T, S_T, S_UA, S_UM, S_X, S_XQ, S_Y,
+                           F_QUANT, F_SAT, F_SATHI, F_SATLO, F_SATW, F_STEP, F_SUB, F_US, F_VMAX, F_VMIN, F_XMID,
+                           F_YS, F_YSTOPHI, F_YSTOPLO, N_F, S_DIDX, S_DT_T, S_T, S_UA, S_UM, S_X, S_XQ, S_Y,
                            _plant_loop)
 from .profiles import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, get_profile
 from .stroke import check_bounded, rest_stroke
 from .truth_effects import Effects, asymmetry_kernel, saturation_kernel
 
-__all__ = ["PlantConfig", "Plant", "StepResult", "RunResult", "CLIP_RANGE", "CLIP_SLEW", "CLIP_NONFINITE",
-           "AT_STOP"]
+__all__ = ["PlantConfig", "Plant", "StepResult", "RunResult", "CLIP_RANGE", "CLIP_SLEW", "CLIP_NONFINITE", "AT_STOP",
+           "STOP_MARGIN"]
 
-#: Flag bit: the stage was held by a mechanical stop during the sample (see the module docstring).
+#: Flag bit: the stage sat on a mechanical end stop during the sample (the model's hysteretic state was held
+#: there). Not a clip of the command: the input was legal, the stage's physics would have left its travel.
 AT_STOP = 8
+#: End stops sit this fraction of the nominal stroke beyond the rest positions at v_min and v_max. A real
+#: flexure stage's travel ends a little past its rated stroke; without a stop, an MBW model driven far outside
+#: the excitations it was identified on (0/150 V alternating each sample) diverges to kilometres.
+STOP_MARGIN = 0.25
 
 _NORMAL_BLOCK = 4096  # rows of pre-drawn N(0,1) pairs; the stream is the same however it is consumed
 
@@ -85,9 +90,6 @@ class PlantConfig:
         Physical effects; all off by default.
     seed : int
         Seed of the noise/drift random stream (:meth:`Plant.reset` restarts it).
-    stop_margin : float
-        Mechanical stops at ``stroke`` widened by this fraction of its span on each side (hysteresis loops and
-        creep pass the rest displacements a little; a real stage's travel ends not far beyond).
     """
 
     mbw: MBWParams
@@ -100,7 +102,6 @@ class PlantConfig:
     mbw_substeps: int = 1
     effects: Effects = field(default_factory=Effects)
     seed: int = 0
-    stop_margin: float = 0.25
 
     def __post_init__(self) -> None:
         self.validate()
@@ -122,8 +123,6 @@ class PlantConfig:
             raise ConfigError("MBW parameters must be finite with positive u_scale and y_scale")
         if self.stroke is not None and not (len(self.stroke) == 2 and self.stroke[0] < self.stroke[1]):
             raise ConfigError("stroke must be (x_lo, x_hi) with x_lo < x_hi (m)")
-        if not (math.isfinite(self.stop_margin) and 0.0 <= self.stop_margin <= 10.0):
-            raise ConfigError(f"stop_margin must be in [0, 10] (fraction of the stroke), got {self.stop_margin!r}")
         if not isinstance(self.effects, Effects):
             raise ConfigError("effects must be an Effects instance")
         self.effects.validate()
@@ -209,8 +208,7 @@ def substeps_for(dt: float, model_dt: float) -> int:
 
 
 class StepResult(NamedTuple):
-    """One sample: sensor reading ``y`` (m), voltage ``u_applied`` (V), ``clipped`` (range/slew/non-finite),
-    ``at_stop`` (the stage was held by a mechanical stop)."""
+    """One sample: sensor reading ``y`` (m), voltage ``u_applied`` (V), ``clipped`` (range/slew/non-finite)."""
 
     y: float
     u_applied: float
@@ -360,7 +358,6 @@ class Plant:
         lo, hi = stroke
         span = hi - lo
         f = np.zeros(N_F)
-        f[F_STOPLO], f[F_STOPHI] = lo - cfg.stop_margin * span, hi + cfg.stop_margin * span
         f[F_US], f[F_YS], f[F_OFF] = cfg.mbw.u_scale, cfg.mbw.y_scale, cfg.mbw.offset
         f[F_VMIN], f[F_VMAX], f[F_STEP] = cfg.v_min, cfg.v_max, cfg.slew_max * cfg.dt
         f[F_SUB], f[F_DT], f[F_DELAY] = cfg.mbw_substeps, cfg.dt, e.delay.strength
@@ -382,6 +379,9 @@ class Plant:
             f[F_DA] = d.sine * d.strength * d.period / (2.0 * math.pi)
             f[F_DQ] = d.walk * d.strength * math.sqrt(cfg.dt)
         f[F_NOISE], f[F_QUANT] = e.noise.strength, e.quantization.strength
+        # mechanical end stops, on the model's own scale (y_scale > 0 is checked by MBWParams)
+        f[F_YSTOPLO] = (lo - STOP_MARGIN * span - cfg.mbw.offset) / cfg.mbw.y_scale
+        f[F_YSTOPHI] = (hi + STOP_MARGIN * span - cfg.mbw.offset) / cfg.mbw.y_scale
         self._cfg, self._p, self._f, self._stroke = cfg, p, f, (float(lo), float(hi))
         self._creep_a, self._phi, self._gam = creep_a, phi, gam
         if initial:

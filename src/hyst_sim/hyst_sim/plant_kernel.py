@@ -1,6 +1,6 @@
 """The plant's compiled per-sample loop and the layout of its packed settings/state arrays (split from plant.py).
 
-See :mod:`hyst_sim.plant` for the signal chain; this module holds only what numba compiles.
+See :mod:`hyst_sim.plant` for the signal chain and the end stops; this module holds only what numba compiles.
 """
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from .truth_effects import asymmetry_kernel, creep_kernel, dynamics_kernel, satu
 
 # Indices into the packed float settings (_F) and state (_S) arrays of the compiled loop.
 (F_US, F_YS, F_OFF, F_VMIN, F_VMAX, F_STEP, F_SUB, F_ASYM, F_XMID, F_HALF, F_CREEP, F_SAT, F_SATLO, F_SATHI,
- F_SATW, F_DYN, F_DR, F_DA, F_DW, F_DQ, F_NOISE, F_QUANT, F_DT, F_DELAY, F_STOPLO, F_STOPHI) = range(26)
+ F_SATW, F_DYN, F_DR, F_DA, F_DW, F_DQ, F_NOISE, F_QUANT, F_DT, F_DELAY, F_YSTOPLO, F_YSTOPHI) = range(26)
 N_F = 26
 (S_Y, S_UM, S_UA, S_T, S_DRIFT, S_DT_T, S_DIDX, S_XQ, S_X) = range(9)
 
@@ -37,18 +37,17 @@ def _plant_loop(u_cmd, p, f, st, creep_a, creep_c, phi, gam, dz, dbuf, normals, 
         um = ue / f[F_US]
         y = st[S_Y]
         up = st[S_UM]
-        ylo = (f[F_STOPLO] - f[F_OFF]) / f[F_YS]
-        yhi = (f[F_STOPHI] - f[F_OFF]) / f[F_YS]
         for _ in range(n_sub):
             y = mbw_step(p, y, um, up)
             up = um
-            # the mechanical stop holds the stage, and with it the hysteresis state (NaN -> diverged: at a stop)
-            if y > yhi:
-                y = yhi
-                flags |= 8
-            elif not y >= ylo:
-                y = ylo
-                flags |= 8
+        # The stage cannot leave its travel. A non-finite state is a numerical break, not physics: it is left
+        # to _advance, which raises SimError so the node resets instead of publishing a stop position.
+        if y < f[F_YSTOPLO] and math.isfinite(y):
+            y = f[F_YSTOPLO]
+            flags |= 8
+        elif y > f[F_YSTOPHI] and math.isfinite(y):
+            y = f[F_YSTOPHI]
+            flags |= 8
         st[S_Y] = y
         st[S_UM] = um
         x = f[F_YS] * y + f[F_OFF]
@@ -61,12 +60,6 @@ def _plant_loop(u_cmd, p, f, st, creep_a, creep_c, phi, gam, dz, dbuf, normals, 
             x = saturation_kernel(x, f[F_SATLO], f[F_SATHI], f[F_SATW])
         if f[F_DYN] != 0.0:
             x = dynamics_kernel(dz, phi, gam, x)
-        if x > f[F_STOPHI]:
-            x = f[F_STOPHI]
-            flags |= 8
-        elif not x >= f[F_STOPLO]:  # NaN included
-            x = f[F_STOPLO]
-            flags |= 8
         st[S_X] = x
         ym = x
         if f[F_DR] != 0.0:

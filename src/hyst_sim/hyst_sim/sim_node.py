@@ -12,8 +12,9 @@ Modes
     A sampling thread takes one sample per period ``1/rate`` with the latest command, stamped with the node
     clock; the executor thread only handles commands and parameters. (A thread, not an rclpy timer: measured
     here, a SingleThreadedExecutor timer does not hold 1 kHz on a loaded 2-core machine and EventsExecutor
-    timers do not fire at all.) When it falls behind by more than a period it skips the missed samples and
-    counts them (``missed_periods`` on /diagnostics) instead of bursting. No command for ``command_timeout`` s
+    timers do not fire at all.) When it falls behind by more than a period it does not publish the missed
+    samples (no burst) but advances the plant over them at the held voltage, as a real stage keeps moving, and
+    counts them (``missed_periods`` on /diagnostics); ``hyst fit --gaps bridge`` spans such gaps exactly. No command for ``command_timeout`` s
     → the voltage ramps to ``v_safe`` at ``safe_ramp_rate`` V/s.
 ``lockstep`` (deterministic tests)
     Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has
@@ -141,7 +142,7 @@ class SimNode(Node):
         self._last_msg: JointState | None = None
         self._answered = False
         self._counts = dict.fromkeys(("samples", "clip_range", "clip_slew", "nonfinite", "bad_messages", "stale",
-                                      "timeouts", "late_ticks", "at_stop"), 0)
+                                      "timeouts", "late_ticks", "end_stop"), 0)
         self._period_counts = dict(self._counts)
         self._timed_out = False
         self._lock = threading.Lock()    # the plant is stepped by the sampler and reconfigured by the executor
@@ -289,11 +290,6 @@ class SimNode(Node):
                 return
         self._k += 1
         self._count("samples")
-        if r.at_stop:
-            self._count("at_stop")
-            self.get_logger().error(
-                f"stage held by its mechanical stop (applied {r.u_applied:.6g} V): the model cannot follow this "
-                "input", throttle_duration_sec=1.0)
         if r.clipped:
             if not math.isfinite(v_cmd):
                 self._count("nonfinite")
@@ -304,6 +300,12 @@ class SimNode(Node):
             self.get_logger().warning(
                 f"command {v_cmd:.6g} V clipped to {r.u_applied:.6g} V (range [{s.v_min:g}, {s.v_max:g}] V, slew "
                 f"{s.slew_max:g} V/s)", throttle_duration_sec=1.0)
+        if r.at_stop:
+            self._count("end_stop")
+            self.get_logger().error(
+                f"the stage is on its end stop (y = {r.y:.6g} m, stroke {self._plant.stroke_range[0]:.3g}–"
+                f"{self._plant.stroke_range[1]:.3g} m): the input drives the model outside its travel",
+                throttle_duration_sec=1.0)
         msg = JointState()
         msg.header.stamp = stamp
         msg.header.frame_id = s.frame_id
@@ -327,7 +329,9 @@ class SimNode(Node):
                 missed = int(-wait / dt)
                 self._count("late_ticks", missed)
                 due += missed * dt
-                self.get_logger().warning(f"sampler behind: {missed} period(s) skipped", throttle_duration_sec=5.0)
+                self.get_logger().warning(f"sampler behind: {missed} period(s) missed (plant advanced at the held "
+                                          "voltage, not published)", throttle_duration_sec=5.0)
+                self._hold(missed)
             try:
                 self._tick()
             except Exception as err:  # never let the sampler die silently  # noqa: BLE001
@@ -340,6 +344,24 @@ class SimNode(Node):
         if self._sampler is not None and self._sampler.is_alive():
             self._sampler.join(timeout=2.0)
         super().destroy_node()
+
+    def _hold(self, periods: int) -> None:
+        """Advance the plant over periods the sampler missed, at the applied voltage, without publishing.
+
+        A real stage keeps moving while its sampler is late and the DAC holds the last voltage; skipping the
+        plant steps instead would make the stage's own time stand still across the gap. A bag then shows a gap
+        over which the held input is exactly what the stage saw, so ``hyst fit --gaps bridge`` can span it.
+        Capped at 10 s of steps (a process stopped for longer has lost the experiment anyway).
+        """
+        with self._lock:
+            u = self._plant.u_applied
+            for _ in range(min(periods, int(10.0 * self._settings.rate))):
+                try:
+                    self._plant.step(u)
+                except SimError as err:
+                    self.get_logger().error(str(err), throttle_duration_sec=1.0)
+                    self._plant.reset()
+                    return
 
     def _tick(self) -> None:
         s = self._settings
@@ -385,9 +407,7 @@ class SimNode(Node):
         d = {k: c[k] - self._period_counts[k] for k in c}
         self._period_counts = dict(c)
         problems, level = [], DiagnosticStatus.OK
-        if d["at_stop"]:
-            problems.append(f"FAULT: stage at its mechanical stop in {d['at_stop']} sample(s) (input too fast for "
-                            "the model or a diverging model)")
+        if d["end_stop"]:
             level = DiagnosticStatus.ERROR
         missed_share = d["late_ticks"] / max(1, d["late_ticks"] + d["samples"])
         if missed_share > _MISSED_ERROR:
@@ -402,6 +422,9 @@ class SimNode(Node):
                             f"{_DIAG_PERIOD:g} s)")
         if d["bad_messages"]:
             problems.append(f"{d['bad_messages']} malformed commands")
+        if d["end_stop"]:
+            problems.insert(0, f"FAULT: stage on its end stop in {d['end_stop']} samples (the input drives the "
+                               "model outside its travel)")
         st = DiagnosticStatus()
         st.level = level if level != DiagnosticStatus.OK else (DiagnosticStatus.WARN if problems else level)
         st.name = "hyst_sim: stage"
@@ -413,7 +436,7 @@ class SimNode(Node):
                 "clipped_range": c["clip_range"], "clipped_slew": c["clip_slew"],
                 "nonfinite_commands": c["nonfinite"], "malformed_commands": c["bad_messages"],
                 "stale_commands": c["stale"], "timeouts": c["timeouts"], "missed_periods": c["late_ticks"],
-                "missed_share": f"{missed_share:.3f}", "at_stop_samples": c["at_stop"]}
+                "missed_share": f"{missed_share:.3f}", "end_stop_samples": c["end_stop"]}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
@@ -465,7 +488,13 @@ def main(args=None) -> int:
         node = SimNode()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        executor.spin()
+        try:
+            executor.spin()
+        except RuntimeError:
+            # a signal that shuts the context down inside a wait can surface as a bare RuntimeError (as in the
+            # controller node): a normal stop; anything while the context is still up is not
+            if rclpy.ok():
+                raise
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (SimError, ParameterException) as err:  # bad start-up parameters: one line, no traceback

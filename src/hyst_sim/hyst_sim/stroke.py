@@ -29,10 +29,7 @@ def rest_stroke(mbw: MBWParams, p: np.ndarray, v_min: float, v_max: float) -> tu
 
 
 def check_bounded(cfg, p: np.ndarray, stroke: tuple[float, float]) -> None:
-    """Refuse a model that diverges on a full-range 1 Hz and 50 Hz triangle sweep (a bad params file).
-
-    Faster inputs may still drive a model past its validity; the plant's mechanical stops bound those.
-    """
+    """Refuse a model that diverges on a full-range 1 Hz and 50 Hz triangle sweep (a bad params file)."""
     from hyst_model.core import mbw_simulate
 
     span = stroke[1] - stroke[0]

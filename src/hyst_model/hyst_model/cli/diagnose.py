@@ -4,12 +4,17 @@ Fits the base model, tests every effect of :data:`hyst_model.effects.EFFECTS` (p
 files) by its residual signature and by a refit with held-out validation, and prints the ranking, the evidence
 in words, the error ladder and the verdict (see :mod:`hyst_model.diagnose.diagnose`). ``--json`` prints exactly
 one JSON object; ``--report DIR`` writes the HTML report of :mod:`hyst_model.diagnose.report`.
+
+Exit status: 0 when an effect is named or nothing is missing (``none``), 3 when the error is ``unexplained``
+(at least 5× the noise floor and no library effect explains it; the JSON's ``unexplained`` says whether it is
+the loop shape or something outside the library), 2 for bad input.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import os
 import sys
 
 __all__ = ["register", "run"]
@@ -19,7 +24,9 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "diagnose", help="name the physical effect the model is missing (creep, delay, drift, ...)",
         description="Fit the base model, test each effect by its residual signature and a validated refit, "
-                    "rank them and name the missing one ('none' when the residual is at the noise floor).")
+                    "rank them and name the missing one ('none' when the residual is at the noise floor, "
+                    "'unexplained' when it is ≥ 5× the noise floor and no library effect explains it).",
+        epilog="exit status: 0 effect named or none missing; 3 unexplained; 2 bad input")
     p.add_argument("data", metavar="DATA", help="rosbag2 directory / .mcap file (/stage/state) or CSV file")
     p.add_argument("--base", default="mbw", choices=("mbw", "bw"), help="base model (default mbw)")
     p.add_argument("--effects", default="", help="only test these effects (comma-separated; default all)")
@@ -60,9 +67,10 @@ def _text(d, source: str) -> str:
                      f"residual test {c.score:.2f}")
         lines.append(f"      {c.evidence}")
     lines.append("error ladder: " + " → ".join(f"{r.model} {fmt_len(r.rmse)}" for r in d.ladder))
-    lines.append(f"missing effect: {d.missing}")
+    lines.append(f"missing effect: {d.missing}"
+                 + (f" ({d.unexplained.kind})" if d.missing == "unexplained" and d.unexplained else ""))
     lines.append(d.explanation)
-    if d.missing != "none":
+    if d.missing not in ("none", "unexplained"):
         eff = ",".join(d.ladder[-1].effects)
         lines.append(f"next: hyst diagnose DATA --out params.yaml saves {d.ladder[-1].model} as fitted here "
                      f"(or refit it: hyst fit DATA --model {d.base} --effects {eff})")
@@ -74,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
     from ..io.outputs import check_output
     if getattr(args, "out", None):  # refuse now, not after minutes of fitting
         check_output(args.out, force=args.force, what="--out")
-    if getattr(args, "report", None):
+    if getattr(args, "report", None) and not os.path.isdir(args.report):
+        # an existing directory is the report writer's to judge (it may rewrite its own report there)
         check_output(args.report, force=args.force, what="--report", directory=True)
     from ..diagnose.diagnose import diagnose
     from ..effects import load_effect_module
@@ -123,4 +132,4 @@ def run(args: argparse.Namespace) -> int:
             print(f"report: {report_path}")
         if out_path:
             print(f"params: {out_path} ({d.ladder[-1].model})")
-    return 0
+    return 3 if d.missing == "unexplained" else 0

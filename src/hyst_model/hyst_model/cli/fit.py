@@ -25,10 +25,11 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--topic", default="/stage/state", help="state topic in a bag (default /stage/state)")
     p.add_argument("--columns", help="CSV columns for t,u,y, e.g. t_s,voltage_V,displacement_um (default t,u,y)")
     p.add_argument("--units", help="units of those columns, e.g. s,V,um (default: from the name suffix, else SI)")
-    p.add_argument("--gaps", choices=("auto", "bridge", "longest", "refuse"), default="auto",
-                   help="missed sample periods: bridge short gaps and keep the longest part between long ones "
-                        "(auto, default), bridge all (u held, y interpolated), keep the longest regular part, "
-                        "or refuse; repeated (lockstep) time stamps are always collapsed")
+    p.add_argument("--gaps", choices=("auto", "bridge", "longest", "refuse", "error"), default="auto",
+                   help="irregular time stamps: auto (default) collapses repeated stamps (lockstep runs), bridges "
+                        "gaps of up to 10 missed periods (input held, as the DAC holds it) and keeps the longest "
+                        "regular segment between longer ones; bridge: the same but a longer gap is an error; "
+                        "longest: keep the longest regular segment; refuse (= error): stop on any irregularity")
     p.add_argument("--salvage", action="store_true",
                    help="read an MCAP bag whose recorder was killed (no footer) up to its damaged end")
     p.add_argument("--resample", type=float, metavar="HZ",
@@ -60,6 +61,7 @@ def load_checked(args) -> "Record":  # noqa: F821
     rec, notes = regularise(rec, args.gaps)
     for note in notes:
         print(f"hyst: note: {args.data}: {note}", file=sys.stderr)
+    rec.meta["regularised"] = notes
     rec.check()
     if args.resample:
         if not args.resample > 0:
@@ -87,14 +89,14 @@ def register(subparsers) -> None:
     p.add_argument("--out", help="write the params file here (ROS 2 parameters YAML)")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
+                   help="Python file defining extra Effect classes for --effects (repeatable)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_data_options(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    if not Path(args.data).exists():  # say it at once, before the heavy imports
-        raise DataError(f"{args.data}: no such file or bag")
     from ..io.outputs import check_output
     if args.out:  # fail before the imports and a long fit, not after them
         check_output(args.out, force=args.force, what="--out")
@@ -106,6 +108,9 @@ def run(args) -> int:
     out = Path(args.out) if args.out else None
     if args.model not in BASE_MODELS:
         raise ParamsError(f"unknown model {args.model!r}; choose one of {', '.join(sorted(BASE_MODELS))}")
+    from ..effects import load_effect_module
+    for path in args.effect_module:
+        load_effect_module(path)
     effects = [e.strip() for e in args.effects.split(",") if e.strip()]
     split = parse_split(args.train, args.val_fraction)
     rec = load_checked(args)
@@ -119,29 +124,41 @@ def run(args) -> int:
         options["iterations"] = args.iterations
     res = fit(model, rec.t, rec.u, rec.y, method=args.method, seed=args.seed, split=split,
               progress=not args.quiet, **options)
+    from ..identify.admissible import check_admissible
+    adm = check_admissible(model, res.theta)
+    if not adm.clean and not args.json:
+        for line in adm.violations + [f"{b}" for b in adm.at_bounds]:
+            print(f"hyst fit: warning: {line}", file=sys.stderr)
     if out is not None:
         prov = {"method": args.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": str(args.data),
                 "split": res.split, "seconds": round(res.seconds, 3), "samples": len(rec)}
+        if rec.meta.get("regularised"):
+            prov["data_notes"] = "; ".join(rec.meta["regularised"])
         if args.seed is not None:
             prov["seed"] = args.seed
+        prov["controllers"] = adm.controllers
         write_params(out, spec_from_model(model, res.theta, fit=prov, dt=rec.dt), force=args.force)
     if args.json:
         obj = {"model": args.model, "effects": effects, "method": args.method, "rmse": res.rmse,
                "rmse_train": res.rmse_train, "seconds": res.seconds, "params": res.params,
                "n_evaluations": res.n_evaluations, "split": res.split, "samples": len(rec), "dt": rec.dt,
-               "data": str(args.data), "out": str(out) if out else None}
+               "data": str(args.data), "out": str(out) if out else None,
+               "data_notes": list(rec.meta.get("regularised", [])), "admissibility": adm.to_json()}
         print(json.dumps(obj))
     else:
-        print(_table(res, rec, out))
+        print(_table(res, rec, out, adm))
     return 0
 
 
-def _table(res, rec, out) -> str:
+def _table(res, rec, out, adm) -> str:
     lines = [f"model {res.model}  method {res.method}  {len(rec)} samples at {1.0 / rec.dt:.6g} Hz  "
              f"{res.seconds:.2f} s  {res.n_evaluations} evaluations",
              f"RMSE validation {res.rmse * 1e9:.2f} nm   training {res.rmse_train * 1e9:.2f} nm",
              f"split: {res.split}", "", f"{'parameter':<16}{'value':>16}"]
     lines += [f"{k:<16}{v:>16.8g}" for k, v in res.params.items()]
+    lines += ["", f"controllers: {adm.controllers}"]
+    lines += [f"  Remark 4.1 violated: {v}" for v in adm.violations]
+    lines += [f"  {b}" for b in adm.at_bounds]
     if out:
         lines += ["", f"wrote {out}"]
     return "\n".join(lines)

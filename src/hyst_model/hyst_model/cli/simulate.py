@@ -27,6 +27,8 @@ def register(subparsers) -> None:
     p.add_argument("--units", help="units of those columns, e.g. ms,V")
     p.add_argument("--any-rate", action="store_true", help="allow a sample rate different from the fitted one")
     p.add_argument("--force", action="store_true", help="overwrite --out")
+    p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
+                   help="Python file defining the Effect classes a params file uses (repeatable)")
     p.set_defaults(func=run)
 
 
@@ -38,6 +40,9 @@ def run(args) -> int:
 
     from ..io.outputs import check_output
     out = check_output(args.out, force=args.force, what="--out")
+    from ..effects import load_effect_module
+    for path in args.effect_module:
+        load_effect_module(path)
     spec = read_params(args.params)
     model = spec.model()
     theta = spec.theta(model)

@@ -16,7 +16,9 @@ The engine (:func:`diagnose`)
 5. ranks candidates by validation RMSE, calls one *significant* only if it cuts the validation RMSE by at least
    ``min_factor`` and the per-chunk squared-error reduction is significant (robust paired t > ``t_min`` over 40
    validation chunks), and reports ``"none"`` when the baseline is already at the noise floor or nothing is
-   significant — no false alarms;
+   significant — no false alarms. A base error at least :data:`UNEXPLAINED_FACTOR` × the noise floor that no
+   effect explains is ``"unexplained"``, never ``"none"``, with the evidence whether it is the loop shape or
+   something outside the library (:mod:`.unexplained`);
 6. builds the error ladder greedily: base → + best effect → + the next effect that still helps … with the
    validation RMSE at each rung.
 """
@@ -35,8 +37,9 @@ from ..effects import EFFECTS, compose
 from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len, noise_floor, sample_time
 from ..model import Model
+from .unexplained import UNEXPLAINED_FACTOR, Unexplained, explain_unexplained
 
-__all__ = ["Candidate", "Rung", "Diagnosis", "diagnose", "refit", "default_fitter", "validation_mask", "candidate_names",
+__all__ = ["Candidate", "Rung", "Diagnosis", "diagnose", "refit", "guarded_refit", "default_fitter", "validation_mask", "candidate_names",
            "MIN_TRAIN", "MIN_VALID", "SPLIT"]
 
 #: Fewest samples for training / validation; below → FitError("too little data for validation").
@@ -108,6 +111,7 @@ class Diagnosis:
     dt: float
     seconds: float
     models: dict = field(default_factory=dict, repr=False)  # name → (Model, theta), for reports
+    unexplained: Unexplained | None = None  # the error left ≥ UNEXPLAINED_FACTOR × noise, described
 
     def to_json(self) -> dict:
         return {
@@ -123,6 +127,7 @@ class Diagnosis:
             "explanation": self.explanation,
             "split": f"train on the first {1 - SPLIT:.0%}, validate on the last {SPLIT:.0%} (free run from rest)",
             "samples": self.n_samples, "dt": self.dt, "seconds": self.seconds,
+            "unexplained": self.unexplained.to_json() if self.unexplained else None,
         }
 
 
@@ -229,6 +234,42 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
     return m, th, _simulate(m, th, t, u)
 
 
+def _point(m: Model, values: dict) -> np.ndarray:
+    """Packed θ of ``m`` from named values (others at their defaults), clipped to the bounds."""
+    th = np.asarray(m.theta0, dtype=np.float64).copy()
+    names = m.names
+    for k, v in values.items():
+        if k in names and np.isfinite(v):
+            th[names.index(k)] = v
+    lo, hi = m.bounds
+    return np.clip(th, lo, hi)
+
+
+def guarded_refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, val: np.ndarray,
+                  start: dict, **refit_kw) -> tuple[ComposedModel, np.ndarray, np.ndarray]:
+    """:func:`refit`, but never worse on validation than the point it starts from.
+
+    ``start`` names the best model found so far (the base or previous rung's parameters plus the screened
+    effect's values). A joint refit that ends worse than that point — a local minimum, a fitter stopped early —
+    is discarded and the start kept; a refit that fails keeps the start too. Identification never goes backwards.
+    """
+    m = compose(base_model, list(names), cfg)
+    th_s = _point(m, start)
+    try:
+        yh_s = _simulate(m, th_s, t, u)
+    except FitError:
+        yh_s = None
+    try:
+        m2, th, yh = refit(base_model, names, cfg, t, u, y, **refit_kw)
+    except (FitError, EffectError):
+        if yh_s is None:
+            raise
+        return m, th_s, yh_s
+    if yh_s is not None and _rmse((y - yh_s)[val]) < _rmse((y - yh)[val]):
+        return m, th_s, yh_s
+    return m2, th, yh
+
+
 def _scales(u: np.ndarray, y: np.ndarray) -> dict:
     """Normalisation for the base model (:func:`hyst_model.models.data_config`)."""
     from ..models import data_config
@@ -301,6 +342,7 @@ def _effect_values(m: Model, th: np.ndarray, only: str | None = None) -> dict:
 
 def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None, fitter=None,
              min_factor: float = 1.1, t_min: float = 3.0, noise_margin: float = 1.25,
+             unexplained_factor: float = UNEXPLAINED_FACTOR,
              full_rate_top: int = 2, max_rungs: int = 3, progress: bool | Callable = False) -> Diagnosis:
     """Fit ``base``, test each effect by its residual signature and a validated refit, name the missing one.
 
@@ -320,6 +362,9 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         ... and reduce the squared error with a robust paired t statistic above this (40 validation chunks).
     noise_margin : float
         Baseline validation RMSE below ``noise_margin × noise floor`` → nothing is missing.
+    unexplained_factor : float
+        Final validation RMSE at or above this × the noise floor is described as unexplained; with no
+        significant effect the verdict is then ``"unexplained"`` instead of ``"none"``.
     full_rate_top : int
         How many screened candidates get the full joint refit (at each rung of the ladder).
     max_rungs : int
@@ -369,8 +414,10 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
 
     def screen_on(inner: Model, th_inner: np.ndarray, chosen: list[str], nm: str, prior: dict | None):
         """Fit only effect ``nm`` (+ offset) on top of a fixed inner model; return (val RMSE, effect values)."""
-        if compose(base_model, [nm], cfg).effects[-1].kind == "base":
-            # replaces the base recursion (configuration may decide it): only a full refit can tell
+        if compose(base_model, [nm], cfg).effects[-1].screen_with_refit():
+            # replaces the base recursion (configuration may decide it), or transforms its input: a base fitted
+            # without the effect imitates it (its δ terms mimic a delay), so with the base held fixed the effect
+            # looks useless — only a refit with the base on the transformed input can tell
             m, th, yh = refit(base_model, chosen + [nm], cfg, t, u, y, th_base, prior, fit_)
             return _rmse((y - yh)[val]), _effect_values(m, th, nm), (m, th, y - yh)
         fx = Fixed(inner, th_inner)
@@ -381,7 +428,10 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
                 if k in m.names:
                     th0[m.names.index(k)] = v
         th = fit_(m, t, u, y, np.clip(th0, *m.bounds))
-        return _rmse((y - _simulate(m, th, t, u))[val]), _effect_values(m, th, nm), None
+        vals = _effect_values(m, th, nm)
+        if "offset" in m.names:  # the screen refits the offset too: part of the point a refit starts from
+            vals["offset"] = float(th[m.names.index("offset")])
+        return _rmse((y - _simulate(m, th, t, u))[val]), vals, None
 
     # --- screening: each candidate alone on top of the fitted base ----------------------------------------
     cands: dict[str, Candidate] = {}
@@ -430,7 +480,9 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         if c.effect in full or not np.isfinite(c.rmse) or c.improvement < 1.0:
             continue
         try:
-            m, th, yh = refit(base_model, [c.effect], cfg, t, u, y, th_base, None, fit_, prior=carry.get(c.effect))
+            m, th, yh = guarded_refit(base_model, [c.effect], cfg, t, u, y, val,
+                                      {**base_model.unpack(th_base), **carry.get(c.effect, {})},
+                                      theta_base=th_base, fitter=fit_, prior=carry.get(c.effect))
         except (FitError, EffectError):
             continue
         full[c.effect] = (m, th, y - yh)
@@ -440,10 +492,9 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
             c.evidence += " (screened with the base model held fixed)"
     for nm, (m, th, e) in full.items():
         c = cands[nm]
-        r_full = _rmse(e[val])
-        if r_full > c.rmse:  # the joint fit lost to the screening fit: keep the better (screening) number
-            continue
-        c.rmse, c.rmse_train = r_full, _rmse(e[train])
+        # The refit started from the screened point and kept it if it could not improve on it, so its numbers
+        # (and its paired test) stand for the candidate even where the screen's offset differed slightly.
+        c.rmse, c.rmse_train = _rmse(e[val]), _rmse(e[train])
         c.improvement = base_val / c.rmse if c.rmse > 0 else math.inf
         c.t_stat = _paired_t(e_base[val], e[val])
         c.params = _effect_values(m, th)
@@ -488,8 +539,10 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
                 if not cur_val / r_s >= 1.0:
                     continue
                 try:
-                    mm, tth, yh = refit(base_model, chosen + [nm], cfg, t, u, y, prev_m.split(prev_th)[0],
-                                        _effect_values(prev_m, prev_th), fit_, prior=vals)
+                    mm, tth, yh = guarded_refit(base_model, chosen + [nm], cfg, t, u, y, val,
+                                                {**prev_m.unpack(prev_th), **vals},
+                                                theta_base=prev_m.split(prev_th)[0],
+                                                carry=_effect_values(prev_m, prev_th), fitter=fit_, prior=vals)
                 except (EffectError, FitError):
                     continue
                 trial.append((_rmse((y - yh)[val]), nm, mm, tth, y - yh))
@@ -514,6 +567,19 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     for c in ranked:
         c.evidence = _explain(c, base, rung_val.get(tuple(c.on_top_of), base_val))
     missing = chosen[0] if chosen else "none"
+    left = ladder[-1].rmse
+    unexplained = None
+    if left >= unexplained_factor * noise:
+        e_last = y - _simulate(*models[ladder[-1].model], t, u)
+        # Learn the loop-shape function on the first half of the held-out samples, test it on the second: both
+        # halves are out of sample for the model (its training residual is fitted away and says little).
+        vi = np.flatnonzero(val)
+        first = np.zeros(vi.size, dtype=bool)
+        first[: vi.size // 2] = True
+        unexplained = explain_unexplained(u[vi], e_last[vi], first, left, noise, base,
+                                          [nm for nm in names if nm not in chosen])
+        if not chosen:
+            missing = "unexplained"
     if at_floor:
         expl = (f"the {base} model already predicts held-out data to {fmt_len(base_val)} RMS, at the sensor "
                 f"noise floor ({fmt_len(noise)}): no effect is missing")
@@ -521,13 +587,16 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         expl = (f"the {base} model leaves {fmt_len(base_val)} RMS (noise floor {fmt_len(noise)}), but no candidate "
                 f"predicts held-out data significantly better (needs ≥ {min_factor:g}× and paired t ≥ {t_min:g}); "
                 f"the remaining error is none of: {', '.join(names)}")
+        if unexplained is not None:
+            expl = f"unexplained ({unexplained.kind}): {unexplained.evidence}"
     else:
         expl = " → ".join(f"{r.model} {fmt_len(r.rmse)}" for r in ladder)
-        left = ladder[-1].rmse
         expl += (" (at the noise floor)" if left <= noise_margin * noise else
                  f" (still {left / noise:.1f}× the noise floor: something else is missing too)")
+        if unexplained is not None:
+            expl += f"; what is left is {unexplained.kind}: {unexplained.evidence}"
     return Diagnosis(base, base_val, base_tr, noise, ranked, missing, ladder, expl, n, dt,
-                     time.perf_counter() - t0, models)
+                     time.perf_counter() - t0, models, unexplained)
 
 
 def _explain(c: Candidate, base: str, base_val: float) -> str:

@@ -23,13 +23,13 @@ from __future__ import annotations
 
 import html
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..io.modes import mkstemp_user
 from ..errors import HystError
 
 __all__ = ["write_report", "findings", "MARKER", "prepare_dir"]
@@ -166,7 +166,7 @@ def prepare_dir(path: str | os.PathLike, force: bool = False) -> Path:
 
 
 def _save(fig, path: Path) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
+    fd, tmp = mkstemp_user(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
     os.close(fd)
     try:
         fig.savefig(tmp, dpi=110)
@@ -372,7 +372,7 @@ def write_report(dir: str | os.PathLike, record, model_output: np.ndarray, stats
            "margin:.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}img{max-width:100%}")
     doc = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title or 'hyst report')}"
            f"</title><style>{css}</style></head><body>{''.join(parts)}</body></html>\n")
-    fd, tmp = tempfile.mkstemp(prefix=".index.", suffix=".html", dir=d)
+    fd, tmp = mkstemp_user(prefix=".index.", suffix=".html", dir=d)
     with os.fdopen(fd, "w", encoding="utf-8") as fh:
         fh.write(doc)
     os.replace(tmp, d / "index.html")

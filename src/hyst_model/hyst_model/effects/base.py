@@ -127,6 +127,15 @@ class Effect:
         raise NotImplementedError(f"effect {self.name!r} of kind {self.kind!r} must implement apply()")
 
     # --- how it is found ----------------------------------------------------------------------------------
+    def screen_with_refit(self) -> bool:
+        """Whether judging this effect needs the base refitted with it (not the fitted base held fixed).
+
+        True for effects that replace the base recursion or transform its input, and for any effect the base
+        imitates when fitted without it (a delay: the base's δ terms lag too), so that with the base held
+        fixed the effect would look useless.
+        """
+        return self.kind in ("base", "input")
+
     def start(self, t: np.ndarray, u: np.ndarray, y: np.ndarray, residual: np.ndarray) -> dict[str, float]:
         """Initial values (local names) from the data and the base model's residual ``y - y_base``."""
         return {}

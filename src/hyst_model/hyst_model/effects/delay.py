@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import EffectError
 from ..model import Param
 from .base import Effect
 from .signals import corr, rate_of
@@ -16,14 +17,44 @@ from .signals import corr, rate_of
 __all__ = ["Delay"]
 
 
+SIDES = ("input", "output")
+
+
 class Delay(Effect):
-    """Input transport delay τ (s), fractional samples by linear interpolation."""
+    """Transport delay τ (s), fractional samples by linear interpolation, on the input or the output side.
+
+    ``delay.side`` (configuration, default ``input``): ``input`` delays the voltage before the hysteresis
+    (amplifier, driver filters); ``output`` delays the measured displacement (sensor electronics, sample-and-
+    hold). They differ where the input jumps (steps): the hysteresis responds in the same sample, so an
+    interpolated input step is not an interpolated output step. ``hyst diagnose`` tries both
+    (:meth:`variants`) and keeps whichever validates better; ``hyst fit --effects delay --config
+    delay.side=output`` picks one.
+    """
 
     name = "delay"
     summary = "input-to-output transport delay (amplifier and sensor electronics)"
     physics = ("The measurement lags the model by a fixed time: the error is largest where the output moves "
                "fastest and has the opposite sign of the output's rate.")
     kind = "input"
+
+    def __init__(self, config=None):
+        super().__init__(config)
+        side = str(self._config.get("delay.side", "input"))
+        if side not in SIDES:
+            raise EffectError(f"delay.side must be one of {', '.join(SIDES)}, not {side!r}")
+        self.side = side
+        self.kind = side  # instance attribute: where this delay acts
+
+    @staticmethod
+    def variants() -> list[dict[str, str]]:
+        """Configurations ``hyst diagnose`` tries, keeping whichever validates better: both sides."""
+        return [{"delay.side": s} for s in SIDES]
+
+    def config(self) -> dict[str, str]:
+        return {"side": self.side}
+
+    def screen_with_refit(self) -> bool:
+        return True  # a base fitted without the delay imitates it with its δ terms (both sides)
 
     def params(self):
         return (Param("tau", 0.0, 0.0, max(0.05, 50 * self.dt), "s", "transport delay from input to output"),)
@@ -34,12 +65,32 @@ class Delay(Effect):
             return u
         return np.interp(t - tau, t, u, left=u[0])
 
+    def output(self, theta, t, u, y):
+        tau = float(theta[0])
+        if tau <= 0.0:
+            return y
+        return np.interp(t - tau, t, y, left=y[0])
+
     def start(self, t, u, y, residual):
-        # The model x = y − residual leads the measurement: y(t) ≈ x(t − τ). Search τ on a grid of samples.
+        """τ from the data's own impulse response, else from shifting the base model's output.
+
+        The base recursion (3.21) responds to an input change in the same sample (its ζ1·ν_k term), so the
+        least-squares FIR response of the output increments to the input increments peaks at lag 0 without a
+        delay and at lag τ/Δt with one (split between two lags for fractional delays, as the linear
+        interpolation does). A base fitted without the delay imitates it with its δ terms, which hides the
+        delay from its residual; the impulse response does not depend on that fit. Where the input is too
+        smooth to resolve lags (the FIR regression is ill-conditioned), the residual search is used.
+        """
         t = np.asarray(t, float)
-        x = np.asarray(y, float) - residual
+        u = np.asarray(u, float)
+        y = np.asarray(y, float)
         dt = float(np.median(np.diff(t)))
         hi = self.params()[0].upper
+        tau = _fir_delay(u, y, min(int(hi / dt), 40))
+        if tau is not None:
+            return {"tau": float(np.clip(tau * dt, 0.0, hi))}
+        # The model x = y − residual leads the measurement: y(t) ≈ x(t − τ). Search τ on a grid of samples.
+        x = y - residual
         best_tau, best = 0.0, float(residual @ residual)
         for k in range(1, int(hi / dt) + 1):
             xs = np.concatenate([np.full(k, x[0]), x[:-k]])
@@ -54,3 +105,36 @@ class Delay(Effect):
         score = float(np.clip(-c, 0.0, 1.0))
         return score, (f"the residual is proportional to minus the input's rate (corr {c:+.2f}): the model "
                        f"moves before the measurement does, as with a delay of a few samples")
+
+
+def _fir_delay(u: np.ndarray, y: np.ndarray, lags: int) -> float | None:
+    """Delay in samples (fractional) from the FIR least-squares response of Δy to Δu, or None if unresolved.
+
+    Returns None when the regression is ill-conditioned (smooth inputs: neighbouring lags indistinguishable)
+    or the response has no clear peak (its largest tap below half the sum of the positive taps near it).
+    """
+    du, dy = np.diff(u), np.diff(y)
+    n = du.size
+    if lags < 1 or n < 20 * (lags + 1):
+        return None
+    X = np.lib.stride_tricks.sliding_window_view(np.concatenate([np.zeros(lags), du]), lags + 1)[:, ::-1]
+    G = X.T @ X
+    d = np.sqrt(np.diag(G))
+    if not np.all(d > 0):
+        return None
+    Gn = G / np.outer(d, d)
+    if np.linalg.cond(Gn) > 1e4:
+        return None
+    h = np.linalg.solve(Gn, (X.T @ dy) / d) / d
+    k = int(np.argmax(h))
+    if h[k] <= 0:
+        return None
+    lo, hi = h[k - 1] if k > 0 else 0.0, h[k + 1] if k < lags else 0.0
+    near = h[max(k - 2, 0): k + 3]
+    if h[k] < 0.5 * near[near > 0].sum():
+        return None
+    if hi >= lo and hi > 0:
+        return k + hi / (h[k] + hi)
+    if lo > 0:
+        return k - lo / (h[k] + lo)
+    return float(k)

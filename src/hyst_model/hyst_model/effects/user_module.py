@@ -56,8 +56,14 @@ def load_effect_module(path: str | Path) -> list[str]:
                and obj.__module__ == modname]
     if not classes:
         raise EffectError(f"effect module {p}: defines no subclass of hyst_model.effects.Effect")
+    from . import EFFECTS
     names = []
     for cls in classes:
+        have = EFFECTS.get(getattr(cls, "name", None))
+        if have is not None and have.__module__.startswith("hyst_model.effects."):
+            # a user file must not silently replace a built-in (its params files would change meaning)
+            raise EffectError(f"effect module {p}: {cls.__name__} is named {cls.name!r}, a built-in effect; "
+                              "give it another name")
         _check(p, cls)
         register(cls, replace=True)
         names.append(cls.name)

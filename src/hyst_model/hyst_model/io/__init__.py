@@ -11,8 +11,10 @@ from .bag import STATE_TOPIC, JointStates, list_topics, read_joint_states, read_
 from .csvio import UNITS, read_csv, write_csv
 from .params_file import ParamsSpec, read_params, spec_from_model, write_params
 from .record import Record
+from .regular import GAP_POLICIES, regularise
 
 __all__ = [
+    "GAP_POLICIES", "regularise",
     "Record", "load_record", "is_bag",
     "STATE_TOPIC", "JointStates", "list_topics", "read_joint_states", "read_state_bag", "write_state_bag",
     "UNITS", "read_csv", "write_csv",

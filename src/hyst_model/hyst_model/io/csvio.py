@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import io
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from .modes import mkstemp_user
 from ..errors import DataError
 from .record import Record
 
@@ -155,7 +155,7 @@ def write_csv(path: str | Path, columns: Mapping[str, np.ndarray], *, force: boo
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         raise DataError(f"{parent}: no such directory")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=parent)
+    fd, tmp = mkstemp_user(prefix=f".{path.name}.", dir=parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(",".join(names) + "\n")

@@ -1,5 +1,5 @@
-"""Output files: checked before the work (refuse an existing target at once, not after minutes) and written
-atomically with the user's umask (``mkstemp`` alone gives 0600)."""
+"""Output files checked before the work: refuse an existing target at once, not after minutes of fitting
+(the user's umask on the written file is :mod:`.modes`' job)."""
 from __future__ import annotations
 
 import os
@@ -8,29 +8,7 @@ from pathlib import Path
 
 from ..errors import ParamsError
 
-__all__ = ["check_output", "umask_mode", "apply_umask"]
-
-
-def umask_mode(base: int = 0o666) -> int:
-    """``base`` masked by the process umask (read without changing it for other threads where possible)."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("Umask:"):
-                    return base & ~int(line.split()[1], 8)
-    except OSError:
-        pass
-    mask = os.umask(0o022)  # fallback: the classic read-and-restore
-    os.umask(mask)
-    return base & ~mask
-
-
-def apply_umask(fd_or_path, base: int = 0o666) -> None:
-    """Give a temporary file the mode a plain ``open(..., "w")`` would have had."""
-    if isinstance(fd_or_path, int):
-        os.fchmod(fd_or_path, umask_mode(base))
-    else:
-        os.chmod(fd_or_path, umask_mode(base))
+__all__ = ["check_output"]
 
 
 def check_output(path: str | Path, *, force: bool = False, what: str = "output", directory: bool = False) -> Path:

@@ -23,7 +23,6 @@ directory) and never replace an existing file unless ``force=True``; without ``f
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .modes import mkstemp_user
 from ..errors import HystError, ParamsError
 from ..model import Model
 
@@ -147,16 +147,15 @@ def write_params(path: str | Path, spec: ParamsSpec, *, force: bool = False, nod
     ParamsError
         ``path`` exists and ``force`` is false, or its directory does not exist.
     """
-    from .outputs import apply_umask, check_output
+    from .outputs import check_output
     path = check_output(path, force=force, what="params file")
     parent = path.parent if str(path.parent) else Path(".")
     text = to_yaml(spec, node)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
+        fd, tmp = mkstemp_user(prefix=f".{path.name}.", suffix=".tmp", dir=parent)  # the user's umask, not 0600
     except OSError as err:
         raise ParamsError(f"cannot write {path}: {err.strerror or err}") from err
     try:
-        apply_umask(fd)  # mkstemp creates 0600; the user expects their umask, also after --force
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
             fh.flush()
@@ -193,9 +192,8 @@ def read_params(path: str | Path) -> ParamsSpec:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ParamsError(f"{path}: no such params file") from None
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as err:
-        msg = " ".join(str(err).split())[:200]  # one line, even for a YAML error with a context block
-        raise ParamsError(f"{path}: cannot read params file ({msg})") from err
+    except (OSError, yaml.YAMLError, UnicodeDecodeError, RecursionError) as err:  # binary, garbage, unreadable
+        raise ParamsError(f"{path}: cannot read params file ({type(err).__name__}: {str(err)[:200]})") from err
     if not isinstance(doc, Mapping):
         raise ParamsError(f"{path}: not a ROS 2 parameters file (expected '/**: ros__parameters: model: ...')")
     section = None
@@ -233,18 +231,13 @@ def read_params(path: str | Path) -> ParamsSpec:
     if bad:
         raise ParamsError(f"{path}: non-finite value for {', '.join(bad)}")
     spec.theta(m)  # every parameter present
-    _check_scales(path, spec.config)
+    # A missing scale silently became 1.0 (a −6 cm output); a non-positive dt breaks every per-sample model.
+    needed = [k for k in ("u_scale", "y_scale") if k in m.config() and k not in spec.config]
+    if needed:
+        raise ParamsError(f"{path}: model.{' and model.'.join(needed)} missing (V per model unit, m per model unit); "
+                          "a params file written by 'hyst fit' has them")
+    for k in ("u_scale", "y_scale", "dt"):
+        v = spec.config.get(k)
+        if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+            raise ParamsError(f"{path}: model.{k} must be a positive number, got {v!r}")
     return spec
-
-
-def _check_scales(path: Path, config: dict) -> None:
-    """A missing scale silently defaulting to 1.0 gave a −6 cm output (issue 13): the scales and dt are required."""
-    for key in ("u_scale", "y_scale", "dt"):
-        v = config.get(key)
-        if v is None and key == "dt":
-            continue  # optional (a model written without a sample period); when given it must be positive
-        if v is None:
-            raise ParamsError(f"{path}: model.{key} missing (hyst fit writes it; add it by hand, e.g. "
-                              f"{key}: 1.0)")
-        if isinstance(v, str) or not np.isfinite(v) or v <= 0:
-            raise ParamsError(f"{path}: model.{key} must be a positive number, got {v!r}")

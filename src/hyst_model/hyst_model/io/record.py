@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import DataError
 
-__all__ = ["Record", "MIN_SAMPLES", "regularise"]
+__all__ = ["Record", "MIN_SAMPLES"]
 
 #: Fewer samples than this cannot identify an eight-parameter model.
 MIN_SAMPLES = 20
@@ -99,15 +99,16 @@ class Record:
         if (d <= 0).any():
             k = int(np.flatnonzero(d <= 0)[0])
             raise DataError(f"{where}: time stamps not strictly increasing at row {k + 1} "
-                            f"(t={self.t[k]:.9g} then {self.t[k + 1]:.9g} s); repeated stamps are collapsed by "
-                            "hyst_model.io.regular.regularise (--gaps)")
+                            f"(t={self.t[k]:.9g} then {self.t[k + 1]:.9g} s); repeated stamps from a lockstep "
+                            "run are collapsed by --gaps auto")
         dt = float(np.median(d))
         gaps = np.flatnonzero(d > max_gap * dt)
         if gaps.size:
             k = int(gaps[0])
             raise DataError(f"{where}: {gaps.size} gap(s) in the time stamps (first after t={self.t[k]:.6f} s: "
                             f"{d[k] * 1e3:.3f} ms vs a {dt * 1e3:.3f} ms sample period); samples were lost — "
-                            "use --gaps auto|bridge|longest")
+                            "--gaps auto bridges short gaps (input held) and keeps the longest regular segment "
+                            "between long ones; --gaps longest keeps only that segment")
         return self
 
     def jitter(self) -> float:
@@ -158,6 +159,3 @@ class Record:
         r.meta["segment"] = [int(a), int(b)]
         r.meta["dropped_samples"] = int(len(self) - (b - a))
         return r
-
-
-from .regular import regularise  # noqa: E402  (re-export: the identification node imports it from here)

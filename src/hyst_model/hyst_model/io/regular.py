@@ -1,5 +1,19 @@
-"""Make a recorded run regular as the rig produced it: lockstep duplicate stamps collapsed, missed periods
-bridged or split off (issue 11). Pure numpy; used by ``hyst fit|compare|diagnose`` and the identification node."""
+"""Make a rig's record regular as it comes: collapse repeated stamps, bridge or cut gaps, and say what was done.
+
+Two artefacts of a live rig make a record irregular, and neither is the user's fault:
+
+* **Repeated stamps.** The lockstep sim (and a driver re-sending its first sample until it is answered)
+  publishes sample 0 several times with the same stamp; the recorder keeps every copy. Copies at one stamp are
+  one sample: the last copy is kept (it is the newest reading of that instant), and the count is reported.
+* **Missed periods.** A real-time sampler that falls behind publishes nothing for a few periods, while the
+  stage keeps moving under the voltage the DAC holds. Over such a gap the input is known exactly (held), so a
+  short gap is *bridged*: the missing sample times are put back on the grid with ``u`` held and ``y``
+  interpolated linearly (those few ``y`` values are estimates; ``meta['bridged']`` holds their indices).
+  A long gap (more than ``max_bridge`` periods) is not bridged: the record is cut there and the longest
+  regular segment kept.
+
+Time running backwards is never repaired (it means a merged or corrupted file) and stays an error.
+"""
 from __future__ import annotations
 
 import numpy as np
@@ -7,100 +21,117 @@ import numpy as np
 from ..errors import DataError
 from .record import Record
 
-__all__ = ["regularise", "GAP_MODES", "BRIDGE_MAX_PERIODS"]
+__all__ = ["GAP_POLICIES", "regularise"]
 
-GAP_MODES = ("auto", "bridge", "longest", "refuse")
-#: Longest gap ``auto`` bridges, in missed sample periods: over a few periods the DAC holds the voltage and the
-#: stage moves little, so holding u and interpolating y is faithful; beyond that the record is split.
-BRIDGE_MAX_PERIODS = 5
-_MAX_GAP = 1.5  # a step above this many median periods is a gap (as Record.check)
+#: ``auto``: bridge gaps of at most ``max_bridge`` periods, keep the longest segment between longer ones;
+#: ``bridge``: the same, but a longer gap is an error; ``longest``: keep the longest regular segment;
+#: ``refuse`` (alias ``error``): any gap or repeated stamp is an error.
+GAP_POLICIES = ("auto", "bridge", "longest", "refuse", "error")
 
 
-def _collapse_duplicates(rec: Record) -> tuple[Record, int]:
+def _collapse_repeats(rec: Record, notes: list[str]) -> Record:
     d = np.diff(rec.t)
     if (d < 0).any():
         k = int(np.flatnonzero(d < 0)[0])
-        raise DataError(f"{rec.source}: time stamps go backwards at row {k + 1} (t={rec.t[k]:.9g} then "
-                        f"{rec.t[k + 1]:.9g} s); sort or cut the record")
+        raise DataError(f"{rec.source}: time runs backwards at row {k + 1} (t={rec.t[k]:.9g} then "
+                        f"{rec.t[k + 1]:.9g} s); sort or cut the record first")
+    rep = np.flatnonzero(d == 0)
+    if rep.size == 0:
+        return rec
     keep = np.ones(len(rec), dtype=bool)
-    keep[1:] = d > 0  # the first copy of a repeated stamp is the sample; later copies are re-publications
-    n = int((~keep).sum())
-    if n == 0:
-        return rec, 0
-    return Record(rec.t[keep], rec.u[keep], rec.y[keep], dict(rec.meta)), n
+    keep[rep] = False            # of a run of equal stamps keep the last copy
+    differ = int(np.sum((rec.u[rep] != rec.u[rep + 1]) | (rec.y[rep] != rec.y[rep + 1])))
+    what = f"; {differ} of them with different values (kept the newest)" if differ else " (identical copies)"
+    notes.append(f"collapsed {rep.size} repeated time stamp(s){what}")
+    out = Record(rec.t[keep], rec.u[keep], rec.y[keep], dict(rec.meta))
+    out.meta["collapsed_repeats"] = int(rep.size)
+    return out
 
 
-def _bridge(rec: Record, dt: float, gaps: np.ndarray) -> Record:
-    t_parts, u_parts, y_parts = [], [], []
-    start = 0
+def _bridge(rec: Record, dt: float, gaps: np.ndarray, notes: list[str]) -> Record:
+    """Put back the sample times of the given gaps (indices into diff(t)): u held, y interpolated."""
+    ts, us, ys, bridged = [rec.t], [rec.u], [rec.y], []
     for k in gaps:
-        t_parts.append(rec.t[start:k + 1])
-        u_parts.append(rec.u[start:k + 1])
-        y_parts.append(rec.y[start:k + 1])
         m = int(round((rec.t[k + 1] - rec.t[k]) / dt)) - 1
-        tf = rec.t[k] + dt * np.arange(1, m + 1)
-        t_parts.append(tf)
-        u_parts.append(np.full(m, rec.u[k]))  # the DAC holds the last voltage
-        y_parts.append(np.interp(tf, rec.t[k:k + 2], rec.y[k:k + 2]))
-        start = k + 1
-    t_parts.append(rec.t[start:])
-    u_parts.append(rec.u[start:])
-    y_parts.append(rec.y[start:])
-    return Record(np.concatenate(t_parts), np.concatenate(u_parts), np.concatenate(y_parts), dict(rec.meta))
+        if m < 1:
+            continue
+        tt = rec.t[k] + dt * np.arange(1, m + 1)
+        ts.append(tt)
+        us.append(np.full(m, rec.u[k]))
+        ys.append(np.interp(tt, rec.t[k:k + 2], rec.y[k:k + 2]))
+        bridged.append(m)
+    t = np.concatenate(ts)
+    order = np.argsort(t, kind="stable")
+    is_new = np.zeros(t.size, dtype=bool)
+    is_new[len(rec):] = True
+    out = Record(t[order], np.concatenate(us)[order], np.concatenate(ys)[order], dict(rec.meta))
+    out.meta["bridged"] = np.flatnonzero(is_new[order]).tolist()
+    notes.append(f"bridged {len(bridged)} gap(s) of missed periods ({sum(bridged)} samples, longest "
+                 f"{max(bridged)}): input held as the DAC holds it, displacement interpolated")
+    return out
 
 
-def regularise(rec: Record, gaps: str = "auto") -> tuple[Record, list[str]]:
-    """Return a regularly sampled record and human-readable notes on what was changed.
+def regularise(rec: Record, gaps: str = "auto", *, max_gap: float = 1.5, max_bridge: int = 10
+               ) -> tuple[Record, list[str]]:
+    """Return a regularly sampled copy of ``rec`` and notes saying what was changed.
 
     Parameters
     ----------
     rec : Record
-        As read from a bag or CSV (finite values; stamps non-decreasing).
-    gaps : {"auto", "bridge", "longest", "refuse"}
-        Missed sample periods: ``bridge`` fills every gap (u held, y interpolated); ``longest`` keeps the longest
-        regular stretch; ``refuse`` raises :class:`DataError`; ``auto`` bridges gaps of at most
-        :data:`BRIDGE_MAX_PERIODS` periods and keeps the longest stretch between longer ones.
+        Finite samples in SI units (non-finite rows are an error, as in :meth:`Record.check`).
+    gaps : {'auto', 'bridge', 'longest', 'refuse', 'error'}
+        Policy for missed periods and repeated stamps (see :data:`GAP_POLICIES`).
+    max_gap : float
+        A step between stamps above this many median periods is a gap.
+    max_bridge : int
+        Longest gap, in missed samples, that is bridged.
 
     Returns
     -------
     (Record, list of str)
-        ``meta["regularised"]`` holds the counts (duplicates, bridged, split) for reports/JSON.
+        The regular record (``meta['bridged']``: indices of bridged samples; ``meta['segment']`` when cut) and
+        one line per change, empty when the record was regular already.
+
+    Raises
+    ------
+    DataError
+        Time running backwards, or an irregularity the policy does not allow (the message names the option).
     """
-    if gaps not in GAP_MODES:
-        raise DataError(f"unknown gap handling {gaps!r}; choose one of {', '.join(GAP_MODES)}")
+    if gaps not in GAP_POLICIES:
+        raise DataError(f"unknown gap policy {gaps!r}; one of {', '.join(GAP_POLICIES)}")
     notes: list[str] = []
-    info = {"gaps": gaps, "duplicates": 0, "bridged_gaps": 0, "bridged_samples": 0, "dropped_samples": 0}
     if len(rec) < 2 or not np.isfinite(rec.t).all():
-        return rec, notes  # Record.check reports these with the row
-    rec, ndup = _collapse_duplicates(rec)
-    if ndup:
-        info["duplicates"] = ndup
-        notes.append(f"collapsed {ndup} sample(s) with a repeated time stamp (lockstep re-publication)")
-    if len(rec) < 2:
-        return rec, notes
+        return rec, notes                        # Record.check() gives the clear error for these
+    if gaps in ("refuse", "error"):
+        return rec.check(max_gap=max_gap), notes
+    rec = _collapse_repeats(rec, notes)
+    if gaps == "longest":
+        cut = rec.longest_segment(max_gap=max_gap)
+        if cut.meta.get("dropped_samples"):
+            a, b = cut.meta["segment"]
+            notes.append(f"kept the longest regular segment, samples {a}–{b} (dropped {cut.meta['dropped_samples']})")
+        return cut, notes
     d = np.diff(rec.t)
     dt = float(np.median(d))
-    gap_idx = np.flatnonzero(d > _MAX_GAP * dt)
-    if gap_idx.size:
-        missed = np.rint(d[gap_idx] / dt).astype(int) - 1
-        if gaps == "refuse":
-            k = int(gap_idx[0])
-            raise DataError(f"{rec.source}: {gap_idx.size} gap(s) in the time stamps (first after t={rec.t[k]:.6f} s:"
-                            f" {d[k] * 1e3:.3f} ms vs a {dt * 1e3:.3f} ms sample period); samples were lost — "
-                            "use --gaps auto|bridge|longest")
-        short = gap_idx if gaps == "bridge" else (
-            gap_idx[missed <= BRIDGE_MAX_PERIODS] if gaps == "auto" else gap_idx[:0])
-        if short.size:
-            nfill = int(np.rint(d[short] / dt).sum()) - short.size
-            rec = _bridge(rec, dt, short)
-            info.update(bridged_gaps=int(short.size), bridged_samples=nfill)
-            notes.append(f"bridged {short.size} gap(s) of missed periods ({nfill} sample(s): u held, y interpolated)")
-        if short.size < gap_idx.size:
-            n0 = len(rec)
-            rec = rec.longest_segment(max_gap=_MAX_GAP)
-            a, b = rec.meta["segment"]
-            info["dropped_samples"] = n0 - (b - a)
-            notes.append(f"{gap_idx.size - short.size} long gap(s): kept the longest regular segment "
-                         f"(samples {a}–{b}, dropped {n0 - (b - a)})")
-    rec.meta["regularised"] = info
+    gap_idx = np.flatnonzero(d > max_gap * dt)
+    if gap_idx.size == 0:
+        return rec, notes
+    missed = np.rint(d[gap_idx] / dt).astype(int) - 1
+    long_ = gap_idx[missed > max_bridge]
+    if long_.size and gaps == "bridge":
+        k = int(long_[0])
+        raise DataError(f"{rec.source}: a gap of {d[k] * 1e3:.3f} ms after t={rec.t[k]:.6f} s is longer than "
+                        f"{max_bridge} periods and cannot be bridged; use --gaps longest or --gaps auto")
+    short = gap_idx[missed <= max_bridge]
+    if short.size:
+        rec = _bridge(rec, dt, short, notes)
+    if long_.size:
+        cut = rec.longest_segment(max_gap=max_gap)
+        a, b = cut.meta["segment"]
+        notes.append(f"{long_.size} gap(s) longer than {max_bridge} periods: kept the longest regular segment, "
+                     f"samples {a}–{b} of {len(rec)}")
+        if "bridged" in rec.meta:
+            br = np.asarray(rec.meta["bridged"], dtype=int)
+            cut.meta["bridged"] = (br[(br >= a) & (br < b)] - a).tolist()
+        rec = cut
     return rec, notes

@@ -1,0 +1,48 @@
+"""Remark 4.1 and parameters on their bounds are reported for every fit (never silent)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from hyst_model.cli.main import main
+from hyst_model.core import pea_default
+from hyst_model.identify.admissible import check_admissible
+from hyst_model.io import write_csv
+from hyst_model.models import data_config
+from hyst_model.spec import build_model
+
+
+def _model():
+    return build_model("mbw", (), dict(data_config(np.r_[0.0, 150.0], np.r_[0.0, 30e-6]), dt=5e-4))
+
+
+def test_thesis_table_4_1_is_admissible_and_a_violation_is_named():
+    m = _model()
+    p = pea_default()
+    vals = {**p.to_dict(), "offset": 0.0}
+    th = np.array([vals[n] for n in m.names])
+    a = check_admissible(m, th)
+    assert a.remark_4_1 is (p.alpha1 < -abs(p.psi1) and p.alpha2 < -abs(p.psi2))
+    th_bad = th.copy()
+    th_bad[m.names.index("alpha2")] = 0.01
+    b = check_admissible(m, th_bad)
+    assert b.remark_4_1 is False and any(v.startswith("alpha2 = 0.01") for v in b.violations)
+    assert "μ floored" in b.controllers
+    lo, _ = m.bounds
+    th_edge = th.copy()
+    th_edge[m.names.index("psi2")] = lo[m.names.index("psi2")]
+    assert any(s.startswith("psi2") and "lower bound" in s for s in check_admissible(m, th_edge).at_bounds)
+
+
+def test_hyst_fit_reports_admissibility_in_json_and_text(tmp_path, capsys):
+    t = np.arange(4000) * 5e-4
+    u = 75 + 60 * np.sin(2 * np.pi * 2 * t) + 10 * np.sin(2 * np.pi * 9 * t)
+    y = pea_default().simulate(u) + 2e-9 * np.random.default_rng(0).standard_normal(t.size)
+    csv = tmp_path / "r.csv"
+    write_csv(csv, {"t": t, "u": u, "y": y})
+    assert main(["fit", str(csv), "--json", "--quiet"]) == 0
+    adm = json.loads(capsys.readouterr().out)["admissibility"]
+    assert set(adm) == {"remark_4_1", "violations", "at_bounds", "controllers"} and adm["controllers"]
+    assert main(["fit", str(csv), "--quiet"]) == 0
+    assert "controllers:" in capsys.readouterr().out

@@ -1,0 +1,161 @@
+"""Cases: a hysteresis truth, an excitation, hidden effects at a calibrated size, noise, and a fresh record."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hyst_model.core import MBWParams
+
+from ..profiles import GMA, PEA, _default_model
+from .excitation import EXCITATIONS, excitation
+from .forms import FORMS, LIBRARY_NAME, Ctx, draw
+
+__all__ = ["Case", "generate_case", "case_family", "KINDS", "EXPECTED"]
+
+#: Case kinds drawn by :func:`case_family`: one effect (large ≥ 5× noise, small 3–5×), a pair, an effect outside
+#: the library, none, and a non-MBW (Prandtl–Ishlinskii) truth with no effect.
+KINDS = ("single_large", "single_small", "pair", "outside", "none", "pi_truth")
+#: Library effects a form is diagnosed as.
+EXPECTED = sorted(set(LIBRARY_NAME.values()) - {"unexplained"})
+RATE = 2000.0
+DURATION = 8.0
+
+
+@dataclass
+class Case:
+    """One generated stage record with its ground truth (arrays in SI: s, V, m)."""
+
+    seed: int
+    kind: str
+    truth: str                    # "pea", "gma" (MBW) or "pi" (Prandtl–Ishlinskii)
+    excitation: str
+    forms: list                   # [(form name, strength in [0, 1])]
+    expected: tuple               # library names, ("none",) or ("unexplained",) — PI truth: ("pi_truth",)
+    size_over_noise: list         # achieved RMS change of each effect / noise σ
+    noise: float
+    t: np.ndarray = field(repr=False)
+    u: np.ndarray = field(repr=False)
+    y: np.ndarray = field(repr=False)
+    t_fresh: np.ndarray = field(repr=False)
+    u_fresh: np.ndarray = field(repr=False)
+    y_fresh: np.ndarray = field(repr=False)
+
+    @property
+    def name(self) -> str:
+        return f"{self.seed}:{self.kind}:{self.truth}:{self.excitation}:{'+'.join(f for f, _ in self.forms) or '-'}"
+
+
+def _mbw_truth(profile: str, rng: np.random.Generator) -> MBWParams:
+    p = _default_model(profile)
+    return p.replace(zeta1=p.zeta1 * rng.uniform(0.85, 1.15), zeta2=p.zeta2 * rng.uniform(0.7, 1.3),
+                     y_scale=p.y_scale * rng.uniform(0.8, 1.2),
+                     offset=p.offset + rng.uniform(-2e-6, 2e-6))
+
+
+def _pi_simulator(v_min: float, v_max: float, stroke: float, rng: np.random.Generator):
+    """Prandtl–Ishlinskii: linear term plus play operators with random, decreasing weights."""
+    n = 8
+    r = np.linspace(0.0, 0.45, n) * (v_max - v_min)
+    w = np.sort(rng.uniform(0.2, 1.0, n))[::-1] * rng.uniform(0.3, 1.0)
+    w[0] = 1.0
+
+    def sim(u: np.ndarray) -> np.ndarray:
+        s = np.full(n, u[0])
+        out = np.empty(u.size)
+        for k, v in enumerate(u):
+            s = np.minimum(np.maximum(s, v - r), v + r)
+            out[k] = w @ s
+        lo, hi = w.sum() * v_min, w.sum() * v_max
+        return (out - lo) / (hi - lo) * stroke
+    return sim
+
+
+def _apply(forms, ctx: Ctx):
+    u, y = ctx.u, ctx.x
+    for name, amp in forms:
+        c = Ctx(ctx.t, u, ctx.simulate, y, ctx.span, ctx.draws[name])
+        u, y = FORMS[name][0](c, amp)
+    return u, y
+
+
+def _calibrate(name: str, ctx: Ctx, target: float) -> tuple[float, float]:
+    """Strength in (0, 1] whose RMS output change is ``target`` (m), by bisection; the size reached."""
+    c = Ctx(ctx.t, ctx.u, ctx.simulate, ctx.x, ctx.span, ctx.draws[name])
+
+    def size(a: float) -> float:
+        return float(np.sqrt(np.mean((FORMS[name][0](c, a)[1] - ctx.x) ** 2)))
+    lo, hi = 0.0, 1.0
+    if size(hi) <= target:
+        return hi, size(hi)
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if size(mid) < target else (lo, mid)
+    return hi, size(hi)
+
+
+def generate_case(seed: int, kind: str | None = None) -> Case:
+    """One case, fully determined by ``seed`` (and ``kind``; drawn from :data:`KINDS` if omitted)."""
+    rng = np.random.default_rng(seed)
+    kind = kind or str(rng.choice(KINDS))
+    truth = "pi" if kind == "pi_truth" else str(rng.choice(["pea", "gma"]))
+    prof = GMA if truth == "gma" else (PEA if truth == "pea" else (PEA if rng.random() < 0.5 else GMA))
+    exc = str(rng.choice(EXCITATIONS))
+    t = np.arange(int(DURATION * RATE)) / RATE
+    if truth == "pi":
+        simulate = _pi_simulator(prof.v_min, prof.v_max, prof.stroke, rng)
+    else:
+        p = _mbw_truth(truth, rng)
+        simulate = p.simulate
+    noise = float(rng.uniform(1e-9, 4e-9))
+    lib = [f for f, n in LIBRARY_NAME.items() if n != "unexplained"]
+    out = [f for f, n in LIBRARY_NAME.items() if n == "unexplained"]
+    if kind in ("single_large", "single_small"):
+        forms = [str(rng.choice(lib))]
+    elif kind == "pair":
+        a = str(rng.choice(lib))
+        forms = [a, str(rng.choice([f for f in lib if LIBRARY_NAME[f] != LIBRARY_NAME[a]]))]
+    elif kind == "outside":
+        forms = [str(rng.choice(out))]
+    else:
+        forms = []
+    draws = {f: draw(f, rng, DURATION) for f in forms}
+    lo_hi = (3.0, 5.0) if kind == "single_small" else (5.0, 200.0)
+    targets = [float(np.exp(rng.uniform(*np.log(lo_hi)))) * noise for _ in forms]
+    seeds = rng.integers(0, 2**31, 3)
+
+    def record(u_seed: int, noise_seed: int):
+        r2 = np.random.default_rng(u_seed)
+        u = excitation(exc, t, prof.v_min, prof.v_max, r2)
+        x = simulate(u)
+        ctx = Ctx(t, u, simulate, x, prof.stroke, {})
+        ctx.draws = draws
+        return u, x, ctx, np.random.default_rng(noise_seed)
+
+    u, x, ctx, nrng = record(int(seeds[0]), int(seeds[1]))
+    strengths, sizes = [], []
+    for f, tg in zip(forms, targets):
+        a, s = _calibrate(f, ctx, tg)
+        strengths.append((f, a))
+        sizes.append(s / noise)
+    ua, y = _apply(strengths, ctx)
+    y = y + noise * nrng.standard_normal(t.size)
+    # fresh record of the same stage: new noise; random excitations get a new realisation too
+    fresh_u_seed = int(seeds[0]) if exc in ("triangles", "sweep") else int(seeds[2])
+    uf, xf, ctxf, nrng_f = record(fresh_u_seed, int(seeds[2]) + 1)
+    _, yf = _apply(strengths, ctxf)
+    yf = yf + noise * nrng_f.standard_normal(t.size)
+    if kind == "pi_truth":
+        expected = ("pi_truth",)
+    elif not forms:
+        expected = ("none",)
+    else:
+        expected = tuple(LIBRARY_NAME[f] for f in forms)
+    return Case(seed, kind, truth, exc, strengths, expected, sizes, noise, t, u, y, t.copy(), uf, yf)
+
+
+def case_family(n: int, seed: int = 0) -> list[Case]:
+    """``n`` cases with a balanced mix of :data:`KINDS` (singles weighted up), seeds ``seed*100000 + i``."""
+    weights = {"single_large": 4, "single_small": 2, "pair": 2, "outside": 1, "none": 2, "pi_truth": 1}
+    order = [k for k, w in weights.items() for _ in range(w)]
+    return [generate_case(seed * 100000 + i, order[i % len(order)]) for i in range(n)]

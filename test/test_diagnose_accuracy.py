@@ -1,0 +1,47 @@
+"""A fixed subset of the accuracy benchmark (bench/bench_diagnose_accuracy.py) as tests.
+
+Seeds are the first of each kind in family seed 42 — not chosen for passing. What holds on held-out families
+is asserted (no false alarm on 'none'; never a bare 'none' when the base error is ≥ 5× the noise); naming the
+right effect does not yet generalise (README: accuracy table), so those cases are expected failures with the
+reason, and turn into passes (xfail strict=False reports XPASS) as the diagnosis improves.
+"""
+from __future__ import annotations
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+FAMILY = 42
+
+
+def _run(i: int, kind: str) -> dict:
+    import importlib.util
+    from pathlib import Path
+    spec = importlib.util.spec_from_file_location(
+        "bench_acc", Path(__file__).resolve().parents[1] / "bench" / "bench_diagnose_accuracy.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.run_case((FAMILY * 100000 + i, kind))
+
+
+@pytest.mark.parametrize("i", [0, 1, 2])
+def test_no_false_alarm_on_none(i):
+    r = _run(i, "none")
+    assert r["named"] == ["none"], r
+
+
+@pytest.mark.parametrize("i,kind", [(0, "outside"), (1, "outside"), (0, "pi_truth"), (1, "pi_truth")])
+def test_a_large_error_is_never_a_bare_none(i, kind):
+    r = _run(i, kind)
+    if r["base_over_noise"] >= 5:
+        assert r["named"][0] != "none" and (r["missing"] == "unexplained" or r["unexplained"] is not None), r
+    else:
+        assert r["named"] == ["none"], r
+
+
+@pytest.mark.xfail(strict=False, reason="issue #10: naming the right effect on unseen forms is 35 % for "
+                                        "effects >= 5x noise (bench_diagnose_accuracy, 200 cases), target 90 %")
+@pytest.mark.parametrize("i", [0, 1, 2, 3])
+def test_large_single_effect_is_named_first(i):
+    r = _run(i, "single_large")
+    assert r["named"][0] == r["expected"][0], r

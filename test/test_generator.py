@@ -1,0 +1,59 @@
+"""The scenario generator (hyst_sim.generator): deterministic, calibrated, within the actuator's limits."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hyst_sim.generator import FORMS, KINDS, case_family, generate_case
+from hyst_sim.generator.forms import LIBRARY_NAME
+from hyst_sim.profiles import GMA, PEA
+
+
+def test_same_seed_same_arrays_other_seed_other_arrays():
+    a, b, c = generate_case(11, "pair"), generate_case(11, "pair"), generate_case(12, "pair")
+    np.testing.assert_array_equal(a.y, b.y)
+    np.testing.assert_array_equal(a.u_fresh, b.u_fresh)
+    assert a.name == b.name and not np.array_equal(a.y, c.y)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_cases_are_labelled_sized_and_within_limits(seed):
+    c = generate_case(seed)
+    assert c.kind in KINDS
+    lim = GMA if c.u.min() < 0 else PEA
+    assert lim.v_min - 1e-9 <= c.u.min() and c.u.max() <= lim.v_max + 1e-9
+    assert np.all(np.isfinite(c.y)) and np.all(np.isfinite(c.y_fresh))
+    assert not np.array_equal(c.y, c.y_fresh)                       # fresh noise at least
+    if c.kind == "single_small":
+        assert 2.9 <= c.size_over_noise[0] <= 5.1, c.size_over_noise   # calibrated to 3–5× the noise σ
+    if c.kind == "single_large":
+        assert c.size_over_noise[0] >= 4.9, (c.name, c.size_over_noise)
+    for f, _ in c.forms:
+        assert f in FORMS
+    if c.kind in ("single_large", "single_small", "pair"):
+        assert c.expected == tuple(LIBRARY_NAME[f] for f, _ in c.forms)
+        assert "unexplained" not in c.expected
+    if c.kind == "outside":
+        assert c.expected == ("unexplained",)
+
+
+def test_family_is_balanced_over_kinds():
+    fam = case_family(24, seed=3)
+    kinds = {c.kind for c in fam}
+    assert kinds == set(KINDS)
+    assert len({c.name for c in fam}) == 24
+
+
+def test_every_form_changes_the_output_and_scales_with_strength():
+    from hyst_sim.generator.cases import _default_model
+    from hyst_sim.generator.forms import Ctx, draw
+    rng = np.random.default_rng(0)
+    t = np.arange(8000) / 2000.0
+    u = 75 + 60 * np.sin(2 * np.pi * 1.5 * t) * np.clip(t / 0.2, 0, 1)
+    sim = _default_model("pea").simulate
+    x = sim(u)
+    for name, (fn, _) in FORMS.items():
+        c = Ctx(t, u, sim, x, 30e-6, draw(name, rng, 4.0))
+        small = np.sqrt(np.mean((fn(c, 0.2)[1] - x) ** 2))
+        large = np.sqrt(np.mean((fn(c, 1.0)[1] - x) ** 2))
+        assert large > 1e-9 and large > small, name
