@@ -27,9 +27,8 @@ Modes
 Health on ``/diagnostics`` (every second): the stage held by a mechanical stop (an input the model cannot follow,
 a diverging model) is an ERROR, never a number; missed realtime periods are a WARN with their share of the
 second (an ERROR above 10 %), clipping a WARN. Parameter sets are all or nothing: :meth:`SimNode.set_parameters`
-validates the whole resulting configuration and applies every parameter or none (remote clients: use the
-``set_parameters_atomically`` service; the per-parameter ``set_parameters`` service validates each against the
-current configuration).
+and the node's ``set_parameters`` service (rclpy's sets each parameter alone) validate the whole resulting
+configuration and apply every parameter or none.
 """
 from __future__ import annotations
 
@@ -42,9 +41,11 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
                                 SetParametersResult)
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_service import ParameterService
 from sensor_msgs.msg import JointState
 
 from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
@@ -66,11 +67,33 @@ def _fp(lo: float, hi: float) -> list:
     return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
+class _AllOrNothingParameterService(ParameterService):
+    """The node's parameter services, with ``set_parameters`` going through :meth:`SimNode.set_parameters`.
+
+    rclpy's service sets each parameter of a request on its own, so a remote ``[v_min=100, v_max=50]`` still
+    applied v_min; here the request is validated as one resulting configuration (one result per parameter).
+    """
+
+    def _set_parameters_callback(self, request, response):
+        params = [Parameter.from_parameter_msg(p) for p in request.parameters]
+        try:
+            response.results = self._get_node().set_parameters(params)
+        except ParameterNotDeclaredException:  # its message names none (rclpy consumes the generator first)
+            node = self._get_node()
+            names = ", ".join(p.name for p in params if not node.has_parameter(p.name))
+            response.results = [SetParametersResult(successful=False, reason=f"undeclared parameter(s): {names}; "
+                                                    "none of this request applied")] * len(params)
+        return response
+
+
 class SimNode(Node):
     """The simulated stage node; see the module docstring."""
 
     def __init__(self, **kwargs) -> None:
-        super().__init__("hyst_sim", **kwargs)
+        services = kwargs.pop("start_parameter_services", True)
+        super().__init__("hyst_sim", start_parameter_services=False, **kwargs)
+        if services:
+            self._parameter_service = _AllOrNothingParameterService(self)
         self._declare_parameters()
         self._settings = self._read_settings()
         try:
