@@ -14,8 +14,9 @@ Modes
     here, a SingleThreadedExecutor timer does not hold 1 kHz on a loaded 2-core machine and EventsExecutor
     timers do not fire at all.) When it falls behind by more than a period it does not publish the missed
     samples (no burst) but advances the plant over them at the held voltage, as a real stage keeps moving, and
-    counts them (``missed_periods`` on /diagnostics); ``hyst fit --gaps bridge`` spans such gaps exactly. No command for ``command_timeout`` s
-    → the voltage ramps to ``v_safe`` at ``safe_ramp_rate`` V/s.
+    counts them (``missed_periods`` on /diagnostics); ``hyst fit --gaps bridge`` spans such gaps exactly. No
+    command for ``command_timeout`` s → the voltage ramps to ``v_safe`` at ``safe_ramp_rate`` V/s. The first
+    sample is taken once ``/stage/state`` has ``wait_for_subscribers`` subscribers (default 1), as in lockstep.
 ``lockstep`` (deterministic tests)
     Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has
     ``wait_for_subscribers`` subscribers (default 1; 2 with a recorder: ``hyst_bag_record`` started first then
@@ -165,8 +166,8 @@ class SimNode(Node):
             description="realtime | lockstep (one sample per answered state; deterministic)", read_only=True,
             additional_constraints="one of: realtime, lockstep; fixed at start"))
         d("wait_for_subscribers", 1, ParameterDescriptor(
-            description="lockstep: publish sample 0 only once /stage/state has this many subscribers (controller "
-                        "+ recorder = 2), so no subscriber misses the start", read_only=True,
+            description="publish the first sample only once /stage/state has this many subscribers (controller "
+                        "+ recorder = 2), so no subscriber misses the start (both modes)", read_only=True,
             integer_range=[IntegerRange(from_value=1, to_value=100, step=1)]))
         d("params_file", "", ParameterDescriptor(description="MBW params file ('' = embedded default stage)"))
         d("scenario_file", "", ParameterDescriptor(
@@ -291,6 +292,11 @@ class SimNode(Node):
 
     def _sample_loop(self) -> None:
         """Realtime mode: one sample per period on a fixed schedule; skip (and count) periods when behind."""
+        # the first sample waits for wait_for_subscribers matched subscribers (a recorder then has the run's
+        # start); the stage rests at v_safe meanwhile, so nothing happens that a subscriber could miss
+        while self._pub.get_subscription_count() < self._wait_n:
+            if self._stop.wait(0.01):
+                return
         due = time.monotonic()
         while not self._stop.is_set():
             dt = self._settings.dt
