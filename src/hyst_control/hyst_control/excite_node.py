@@ -3,8 +3,9 @@
 Answers every ``/stage/state`` sample with one ``/stage/command`` (``effort[0]`` V, ``header.stamp`` = the stamp of
 the state it answers, as the controller does; docs/ARCHITECTURE.md), so it drives the lockstep sim, the realtime
 sim and the driver alike. The command answering the state stamped ``t`` is excitation sample
-``round((t - t_first)·rate) + 1`` (time-indexed: a missed period skips its sample instead of shifting the rest; a
-repeated stamp — lockstep re-announcing sample 0 — is answered with the same value). After the last sample the
+``round((t - t_first)·rate) + 1`` (time-indexed: a missed period skips its sample instead of shifting the rest, and
+the jump over a gap is faded in over ``step_rise``; a repeated stamp — lockstep re-announcing sample 0 — is
+answered with the same value). After the last sample the
 node answers once more with the rest voltage and stops (exit 0). Parameters (all fixed at start): ``profile``,
 ``rate``, ``v_min``, ``v_max``, ``slew_max``, ``parts``, ``amplitudes``, ``frequency``, ``periods``, ``n_steps``,
 ``hold``, ``step_rise``, ``f_lo``, ``f_hi``, ``seconds``, ``seed`` (see :mod:`hyst_control.excitation`) and
@@ -46,6 +47,9 @@ class ExciteNode(Node):
         self.excitation = build_excitation(self.spec)
         self.done = False
         self._t_first = None
+        self._k_last = None             # index of the last sample answered
+        self._v_last = None             # the command sent for it (V)
+        self._resume = (0.0, 0.0)       # (stamp s, offset V) of the last gap: the offset fades over step_rise
         self.answered = 0
         self.add_on_set_parameters_callback(
             lambda _p: SetParametersResult(successful=False, reason="excitation parameters apply at start only"))
@@ -120,13 +124,29 @@ class ExciteNode(Node):
             v, self.done = self.spec.rest, True
             self.get_logger().info(f"excitation finished after {self.answered} samples")
         else:
-            v = float(u[max(k, 0)])
+            v = self._blended(t, k)
         out = JointState()
         out.header.stamp = msg.header.stamp
         out.name = ["stage"]
         out.effort = [v if math.isfinite(v) else self.spec.rest]
         self._pub.publish(out)
+        self._k_last, self._v_last = k, out.effort[0]
         self.answered += 1
+
+    def _blended(self, t: float, k: int) -> float:
+        """Excitation sample ``k``, resumed smoothly after missed periods.
+
+        Over a gap the stage held the last voltage while the excitation moved on; jumping to sample ``k`` (up to
+        the full range in one period) drove the simulated MBW stage onto its end stop. The difference fades out
+        by a raised cosine over ``step_rise``, as the steps rise; the timing of the rest is unchanged.
+        """
+        u = self.excitation.u
+        uk = float(u[max(k, 0)])
+        if self._k_last is not None and k > self._k_last + 1 and math.isfinite(uk) and self.spec.step_rise > 0:
+            self._resume = (t, self._v_last - uk)
+        t0, off = self._resume
+        x = (t - t0) / self.spec.step_rise if self.spec.step_rise > 0 else 1.0
+        return uk + off * 0.5 * (1.0 + math.cos(math.pi * x)) if 0.0 <= x < 1.0 else uk
 
 
 def main(args=None) -> int:
