@@ -198,3 +198,41 @@ def test_realtime_bag_with_missed_periods_is_fitted_with_its_notes(tmp_path):
     print("missed share", worst[0], "notes", notes)  # shown with -rP
     assert any("gap" in ln for ln in notes), fit.stderr
     assert "data_notes" in (tmp_path / "p.yaml").read_text()
+
+
+
+
+def test_lockstep_bag_driven_by_the_controller_starts_at_sample_0_and_fits(tmp_path):
+    """A closed-loop lockstep run (PID tracking a 5 Hz sine) recorded and fitted as it is."""
+    bag, lab = tmp_path / "bag", Lab(tmp_path)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    probe = rclpy.create_node("probe", context=ctx)   # on /controller/state: not a /stage/state subscriber
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(probe)
+    n_ctrl = [0]
+    probe.create_subscription(JointState, "/controller/state", lambda _m: n_ctrl.__setitem__(0, n_ctrl[0] + 1), 100)
+    try:
+        lab.record(bag, "/stage/state", "/stage/command")
+        lab.start("sim", "hyst_sim_node", "--ros-args", "-p", f"rate:={RATE}", "-p", "mode:=lockstep",
+                  "-p", "wait_for_subscribers:=2")
+        lab.start("controller", "hyst_controller_node", "--ros-args", "-p", f"rate:={RATE}", "-p", "algorithm:=pid",
+                  "-p", "reference:=sine:5", "-p", "state_decimation:=10", "-p", "watchdog_periods:=1000000")
+        end = time.monotonic() + 300.0          # until the loop has run ~2 s of stage time
+        while n_ctrl[0] < 200 and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        assert n_ctrl[0] >= 200, lab.log("controller")
+        lab.procs["record"][0].send_signal(signal.SIGINT)
+        assert lab.finish("record", 120) == 0, lab.log("record")
+    finally:
+        lab.stop()
+        ex.shutdown()
+        probe.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    s_ns = sorted({_stamp_ns(m) for m in _messages(bag, "/stage/state", JointState)})
+    c_ns = sorted({_stamp_ns(m) for m in _messages(bag, "/stage/command", JointState)})
+    period = int(round(1e9 / RATE))
+    assert s_ns[0] == 0 and np.array_equal(np.diff(s_ns), np.full(len(s_ns) - 1, period)), s_ns[:5]
+    print("first recorded command answers sample", c_ns[0] // period)  # shown with -rP
+    fit = _hyst_fit(bag, tmp_path / "p.yaml")
+    assert fit.returncode == 0, fit.stderr
