@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataError, HystError, ParamsError
+from ..errors import DataError, EffectError, HystError, ParamsError
 
-__all__ = ["register", "run", "add_data_options", "load_checked", "parse_split"]
+__all__ = ["register", "run", "add_data_options", "load_checked", "parse_split", "parse_config"]
 
 
 def add_data_options(p: argparse.ArgumentParser) -> None:
@@ -36,8 +36,29 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
                    help="resample to this rate before fitting (MBW's δ and rate terms are per sample)")
 
 
-def parse_split(train: str | None, val_fraction: float):
-    """``--train T0:T1`` → (t0, t1); otherwise the validation fraction."""
+def parse_config(items: list[str], effects: list[str]) -> dict:
+    """``["dynamics.structure=feedback"]`` → ``{"dynamics.structure": "feedback"}`` (numbers as floats).
+
+    Keys must belong to one of the listed effects (``<effect>.<key>``); the effect itself checks the value.
+    """
+    out: dict = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        name = key.split(".", 1)[0]
+        if not sep or "." not in key or not value:
+            raise DataError(f"--config needs EFFECT.KEY=VALUE, e.g. dynamics.structure=feedback, got {item!r}")
+        if name not in effects:
+            raise DataError(f"--config {key}: effect {name!r} is not in --effects ({', '.join(effects) or 'none'})")
+        try:
+            out[key] = float(value)
+        except ValueError:
+            out[key] = value
+    return out
+
+
+def parse_split(train: str | None, val_fraction: float, how: str = "tail"):
+    """``--train T0:T1`` → (t0, t1); otherwise the validation fraction (``how="tail"``) or ``("blocks", f)``."""
     if train:
         try:
             a, b = (float(x) for x in train.split(":"))
@@ -46,6 +67,8 @@ def parse_split(train: str | None, val_fraction: float):
         if not b > a:
             raise DataError(f"--train end must be after its start ({train})")
         return (a, b)
+    if how == "blocks" and val_fraction > 0:
+        return ("blocks", val_fraction)
     return val_fraction
 
 
@@ -84,6 +107,12 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=None, help="random seed (EPSO)")
     p.add_argument("--iterations", type=int, default=None, help="EPSO iterations (default 200)")
     p.add_argument("--train", metavar="T0:T1", help="train on T0 <= t < T1 (s), validate on t >= T1")
+    p.add_argument("--split", choices=("blocks", "tail"), default="blocks",
+                   help="hold out --val-fraction in 8 interleaved blocks (default; what hyst diagnose does) or "
+                        "as the record's tail")
+    p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
+                   help="effect configuration, e.g. dynamics.structure=feedback or delay.side=output (repeatable; "
+                        "hyst diagnose writes the ones it chose into its params file)")
     p.add_argument("--val-fraction", type=float, default=0.25,
                    help="hold out the last fraction of the record for validation (default 0.25; 0 = none)")
     p.add_argument("--out", help="write the params file here (ROS 2 parameters YAML)")
@@ -112,11 +141,24 @@ def run(args) -> int:
     for path in args.effect_module:
         load_effect_module(path)
     effects = [e.strip() for e in args.effects.split(",") if e.strip()]
-    split = parse_split(args.train, args.val_fraction)
+    split = parse_split(args.train, args.val_fraction, args.split)
+    user_cfg = parse_config(args.config, effects)
     rec = load_checked(args)
+    if isinstance(split, tuple) and split[0] == "blocks":
+        from ..identify import block_mask
+        from ..diagnose.diagnose import BLOCKS
+        split = block_mask(len(rec), float(split[1]), BLOCKS)  # the same hold-out as hyst diagnose
     config = data_config(rec.u, rec.y)
     config["dt"] = rec.dt
-    model = build_model(args.model, effects, config)
+    if not isinstance(split, tuple):
+        # drift knots cover the span the fit scores, as in hyst diagnose
+        train = ~split if isinstance(split, np.ndarray) else np.arange(len(rec)) < round(len(rec) * (1 - split))
+        config["drift.span"] = float(rec.t[train][-1] - rec.t[0])
+    config.update(user_cfg)
+    try:
+        model = build_model(args.model, effects, config)
+    except (EffectError, ValueError) as err:
+        raise DataError(f"--effects/--config: {err}") from err
     options = {}
     if args.iterations is not None:
         if args.method != "epso":

@@ -120,7 +120,12 @@ def mbw_normal_equations(p: np.ndarray, un: np.ndarray, y0: float, S0: np.ndarra
         up = un[k]
         if k < a:
             continue
-        r = (y_scale * yk + offset - target[k - a]) * inv_scale
+        tk = target[k - a]
+        if tk != tk:  # NaN target: a held-out sample (interleaved validation), simulated but not scored
+            if not np.isfinite(yk):
+                return H, g, np.inf
+            continue
+        r = (y_scale * yk + offset - tk) * inv_scale
         if not np.isfinite(r):
             return H, g, np.inf
         rr += r * r

@@ -13,9 +13,9 @@ from ..model import Model
 from .base import Estimator, model_label
 from .fast import FastFit
 from .lsq import LSQFit
-from .result import FitResult, Split, make_split, rmse
+from .result import FitResult, Split, block_mask, make_split, rmse
 
-__all__ = ["fit", "METHODS", "FastFit", "LSQFit", "EPSOFit", "Estimator", "FitResult", "Split", "make_split",
+__all__ = ["fit", "METHODS", "FastFit", "LSQFit", "EPSOFit", "Estimator", "FitResult", "Split", "make_split", "block_mask",
            "rmse", "model_label"]
 
 

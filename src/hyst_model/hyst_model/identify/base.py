@@ -35,8 +35,22 @@ class TrainProblem:
         self.y = y[split.train_start:split.train_stop]
         self.y_full = y[:split.train_stop]  # for starts that look at the data before the scored window
         self.a = split.train_start
-        self.scale = float(np.std(self.y)) or 1.0
+        # interleaved hold-out: masked samples are simulated (the state runs through them) but never scored;
+        # the target is NaN there, which the fused MBW normal equations skip
+        self.keep = None if split.val_mask is None else ~split.val_mask[split.train_start:split.train_stop]
+        if self.keep is not None:
+            self.y = np.where(self.keep, self.y, np.nan)
+            # starts (equation error, effects' data-driven starts) see held-out samples bridged linearly
+            kk = np.ones(self.y_full.size, dtype=bool)
+            kk[self.a:] = self.keep
+            idx = np.arange(kk.size)
+            self.y_full = np.where(kk, self.y_full, np.interp(idx, idx[kk], self.y_full[kk]))
+        self.scale = float(np.std(self._kept(self.y))) or 1.0
         self._bind(model)
+
+    def _kept(self, a: np.ndarray) -> np.ndarray:
+        """The scored rows of a per-sample array (all of them without an interleaved hold-out)."""
+        return a if self.keep is None else a[self.keep]
 
     def _bind(self, model: Model) -> None:
         """Everything that depends on the model: bounds, what it offers (Jacobian, normal equations, inactive
@@ -55,9 +69,9 @@ class TrainProblem:
             return np.asarray(self.model.simulate(np.asarray(theta, dtype=np.float64), self.t, self.u))[self.a:]
 
     def residuals(self, theta: np.ndarray) -> np.ndarray:
-        r = (self.simulate(theta) - self.y) / self.scale
+        r = self._kept((self.simulate(theta) - self.y) / self.scale)
         if not np.all(np.isfinite(r)):
-            return np.full(self.y.size, 1e3)
+            return np.full(r.size, 1e3)
         return r
 
     def for_model(self, model: Model) -> "TrainProblem":
@@ -71,7 +85,7 @@ class TrainProblem:
         self.n_eval += 1
         with np.errstate(all="ignore"):
             _, J = self.model.simulate_jac(np.asarray(theta, dtype=np.float64), self.t, self.u)
-        J = J[self.a:] / self.scale
+        J = self._kept(J[self.a:]) / self.scale
         if not np.all(np.isfinite(J)):
             J = np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
         return J
@@ -81,10 +95,11 @@ class TrainProblem:
         self.n_eval += 1
         with np.errstate(all="ignore"):
             yhat, J = self.model.simulate_jac(np.asarray(theta, dtype=np.float64), self.t, self.u)
-        r = (yhat[self.a:] - self.y) / self.scale
+        r = self._kept((yhat[self.a:] - self.y) / self.scale)
+        J = self._kept(J[self.a:])
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
-            return np.full(self.y.size, np.inf), np.zeros((self.y.size, theta.size))
-        return r, J[self.a:] / self.scale
+            return np.full(r.size, np.inf), np.zeros((r.size, theta.size))
+        return r, J / self.scale
 
     def fd_residuals_jac(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Residuals and a forward-difference Jacobian (p + 1 simulations), stepping inward at bounds.
@@ -120,7 +135,7 @@ class TrainProblem:
 
     def cost(self, theta: np.ndarray) -> float:
         """Training RMSE (m), inf for a diverging parameter set."""
-        r = self.simulate(theta) - self.y
+        r = self._kept(self.simulate(theta) - self.y)
         return rmse(r) if np.all(np.isfinite(r)) else float("inf")
 
     def clip(self, theta: np.ndarray, margin: float = 1e-9) -> np.ndarray:
@@ -179,8 +194,8 @@ class Estimator:
         with np.errstate(all="ignore"):
             yhat = np.asarray(self.model.simulate(theta, t, u))
         res = y - yhat
-        r_tr = rmse(res[split.train_start:split.train_stop])
-        r_val = rmse(res[split.val_start:split.val_stop]) if split.has_validation else r_tr
+        r_tr = rmse(res[split.train_index()])
+        r_val = rmse(res[split.val_index()]) if split.has_validation else r_tr
         if not np.isfinite(r_tr):
             raise FitError(f"{self.method} fit diverged (no finite parameter set found)")
         self.theta_ = np.asarray(theta, dtype=np.float64)

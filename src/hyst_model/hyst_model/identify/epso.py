@@ -101,7 +101,8 @@ class EPSOFit(Estimator):
                 np.zeros(P.shape[0])
             with np.errstate(all="ignore"):
                 Y = mbw_simulate_batch(P, un, y0)[:, problem.a:] * model.y_scale + X[:, -1:]
-                c = np.sqrt(np.mean((Y - problem.y) ** 2, axis=1))
+                D = Y - problem.y
+                c = np.sqrt(np.mean((D if problem.keep is None else D[:, problem.keep]) ** 2, axis=1))
             problem.n_eval += X.shape[0]
         else:
             c = np.array([problem.cost(x) for x in X])

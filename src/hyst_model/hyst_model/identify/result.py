@@ -9,8 +9,14 @@ benchmark define it) **from rest at the start of the record**, and scores two wi
 * ``split = (t0, t1)`` (seconds): train on ``t0 <= t < t1``, validate on ``t >= t1`` (e.g. "the first three
   cycles"). Samples before ``t0`` are simulated but not scored, so the model state carries through them.
 * ``split = 0`` or ``None``: no hold-out; ``rmse`` is then the training RMSE and ``split_`` says so.
+* ``split = mask`` (boolean array, one per sample, True = validation): interleaved hold-out blocks, e.g.
+  :func:`block_mask` (what ``hyst diagnose`` uses). The whole record is simulated; held-out samples are
+  simply not scored in training, so the fit never sees them, and validation covers every part of the
+  excitation (a tail hold-out of a sweep holds out only its highest frequencies, which the model must then
+  extrapolate to).
 
-Training only simulates up to the end of the training window, so held-out samples never influence the fit.
+Training only simulates up to the end of the training window (and never scores masked samples), so held-out
+samples never influence the fit (with a mask, starts see the held-out samples bridged linearly).
 """
 from __future__ import annotations
 
@@ -20,7 +26,7 @@ import numpy as np
 
 from ..errors import FitError
 
-__all__ = ["Split", "make_split", "FitResult", "rmse"]
+__all__ = ["Split", "make_split", "block_mask", "FitResult", "rmse"]
 
 
 def rmse(a: np.ndarray) -> float:
@@ -31,22 +37,63 @@ def rmse(a: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class Split:
-    """Index windows of one record: train ``[train_start, train_stop)``, validation ``[val_start, val_stop)``."""
+    """Index windows of one record: train ``[train_start, train_stop)``, validation ``[val_start, val_stop)``.
+
+    With ``val_mask`` (interleaved blocks) both windows span the record and the mask selects the samples.
+    """
 
     train_start: int
     train_stop: int
     val_start: int
     val_stop: int
     description: str
+    val_mask: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def has_validation(self) -> bool:
         return self.val_stop > self.val_start
 
+    def train_index(self) -> np.ndarray | slice:
+        """Indexer of the training samples (for the residual of a full-record simulation)."""
+        if self.val_mask is not None:
+            return ~self.val_mask
+        return slice(self.train_start, self.train_stop)
+
+    def val_index(self) -> np.ndarray | slice:
+        """Indexer of the validation samples."""
+        if self.val_mask is not None:
+            return self.val_mask
+        return slice(self.val_start, self.val_stop)
+
+
+def block_mask(n: int, fraction: float = 0.25, blocks: int = 8) -> np.ndarray:
+    """Validation mask of ``blocks`` interleaved blocks holding ``fraction`` of ``n`` samples.
+
+    Block j is the last ``fraction`` of the j-th of ``blocks`` equal segments, so the first samples (the start
+    from rest) always train and the record's tail is validated as with a tail split.
+    """
+    if not 0.0 < fraction < 1.0 or blocks < 1:
+        raise FitError(f"block_mask needs 0 < fraction < 1 and blocks >= 1, got {fraction}, {blocks}")
+    m = np.zeros(int(n), dtype=bool)
+    edges = np.linspace(0, n, blocks + 1)
+    for j in range(blocks):
+        a, b = edges[j], edges[j + 1]
+        m[int(round(b - fraction * (b - a))):int(round(b))] = True
+    return m
+
 
 def make_split(t: np.ndarray, split) -> Split:
     """Turn a ``split`` specification (see module docstring) into index windows for sample times ``t``."""
     n = int(np.asarray(t).size)
+    if isinstance(split, np.ndarray) and split.dtype == bool:
+        if split.shape != (n,):
+            raise FitError(f"a validation mask needs one entry per sample ({n}), got shape {split.shape}")
+        nv = int(split.sum())
+        if n - nv < 20 or nv < 1:
+            raise FitError(f"validation mask leaves {n - nv} training and {nv} validation samples")
+        runs = int(np.count_nonzero(np.diff(split.astype(np.int8)) == 1) + (1 if split[0] else 0))
+        return Split(0, n, 0, n, f"train on {n - nv} samples, validate on {nv} samples in {runs} interleaved "
+                                 "blocks, free-run from rest at the record start", val_mask=split.copy())
     if split is None or (isinstance(split, (int, float)) and float(split) == 0.0):
         return Split(0, n, n, n, "no hold-out: validation RMSE equals training RMSE")
     if isinstance(split, (int, float)):
