@@ -64,6 +64,10 @@ class Lab:
     def finish(self, name: str, timeout: float) -> int:
         return self.procs[name][0].wait(timeout)
 
+    def stop_recording(self) -> None:
+        self.procs["record"][0].send_signal(signal.SIGINT)
+        assert self.finish("record", 120) == 0, self.log("record")
+
     def stop(self) -> None:
         for p, _ in self.procs.values():
             if p.poll() is None:
@@ -76,6 +80,33 @@ class Lab:
                 p.kill()
                 p.wait(10)
             log.close()
+
+
+class Probe:
+    """A node of the test in its own context, watching topics (never a /stage/state subscriber)."""
+
+    def __init__(self) -> None:
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx)
+        self.node = rclpy.create_node("probe", context=self.ctx)
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+
+    def collect(self, topic: str, cls) -> list:
+        got: list = []
+        self.node.create_subscription(cls, topic, got.append, 1000)
+        return got
+
+    def spin_until(self, cond, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while not cond() and time.monotonic() < end:
+            self.ex.spin_once(timeout_sec=0.05)
+        return cond()
+
+    def close(self) -> None:
+        self.ex.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
 
 
 def _excite_args(**kw) -> list[str]:
@@ -101,8 +132,7 @@ def _lockstep_run(root: Path, seed: int) -> Path:
             rate=RATE, wait_for_subscribers=2, parts="steps,multisine", n_steps=3, hold=0.05, seconds=0.5,
             seed=seed))
         assert lab.finish("excite", 300) == 0, lab.log("excite")
-        lab.procs["record"][0].send_signal(signal.SIGINT)
-        assert lab.finish("record", 120) == 0, lab.log("record")
+        lab.stop_recording()
     finally:
         lab.stop()
     return bag
@@ -134,14 +164,8 @@ def test_lockstep_bags_hold_every_topics_first_sample_and_fit_as_they_are(tmp_pa
 
 def test_realtime_bag_with_missed_periods_is_fitted_with_its_notes(tmp_path):
     bag, lab = tmp_path / "bag", Lab(tmp_path)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    probe = rclpy.create_node("probe", context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(probe)
-    n_cmd, diags = [0], []
-    probe.create_subscription(JointState, "/stage/command", lambda _m: n_cmd.__setitem__(0, n_cmd[0] + 1), 1000)
-    probe.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 100)
+    probe = Probe()
+    cmds, diags = probe.collect("/stage/command", JointState), probe.collect("/diagnostics", DiagnosticArray)
 
     def stall_reported_and_one_more() -> bool:  # then the recorder has the stall's diagnostics too
         idx = [i for i, d in enumerate(diags) for st in d.status
@@ -155,27 +179,18 @@ def test_realtime_bag_with_missed_periods_is_fitted_with_its_notes(tmp_path):
                         "-p", "wait_for_subscribers:=2")
         lab.start("excite", "hyst_excite_node", "--ros-args", *_excite_args(
             rate=RATE, wait_for_subscribers=3, parts="steps,multisine", n_steps=4, hold=0.1, seconds=3.0, seed=7))
-        end = time.monotonic() + 300.0
-        while n_cmd[0] < 300 and time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.05)
-        assert n_cmd[0] >= 300, lab.log("excite")
+        assert probe.spin_until(lambda: len(cmds) >= 300, 300.0), lab.log("excite")
         sim.send_signal(signal.SIGSTOP)       # the sampler is late by ~0.3 s: a real missed-period gap
         try:
             time.sleep(0.3)
         finally:
             sim.send_signal(signal.SIGCONT)
         assert lab.finish("excite", 300) == 0, lab.log("excite")
-        end = time.monotonic() + 60.0
-        while not stall_reported_and_one_more() and time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.05)
-        assert stall_reported_and_one_more(), [st.message for d in diags for st in d.status]
-        lab.procs["record"][0].send_signal(signal.SIGINT)
-        assert lab.finish("record", 120) == 0, lab.log("record")
+        assert probe.spin_until(stall_reported_and_one_more, 60.0), [st.message for d in diags for st in d.status]
+        lab.stop_recording()
     finally:
         lab.stop()
-        ex.shutdown()
-        probe.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        probe.close()
     shares = [(float({kv.key: kv.value for kv in st.values}["missed_share"]), st.level, st.message)
               for d in _messages(bag, "/diagnostics", DiagnosticArray) for st in d.status
               if st.name == "hyst_sim: stage"]
@@ -205,30 +220,20 @@ def test_realtime_bag_with_missed_periods_is_fitted_with_its_notes(tmp_path):
 def test_lockstep_bag_driven_by_the_controller_starts_at_sample_0_and_fits(tmp_path):
     """A closed-loop lockstep run (PID tracking a 5 Hz sine) recorded and fitted as it is."""
     bag, lab = tmp_path / "bag", Lab(tmp_path)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    probe = rclpy.create_node("probe", context=ctx)   # on /controller/state: not a /stage/state subscriber
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(probe)
-    n_ctrl = [0]
-    probe.create_subscription(JointState, "/controller/state", lambda _m: n_ctrl.__setitem__(0, n_ctrl[0] + 1), 100)
+    probe = Probe()
+    ctrl = probe.collect("/controller/state", JointState)
     try:
         lab.record(bag, "/stage/state", "/stage/command")
         lab.start("sim", "hyst_sim_node", "--ros-args", "-p", f"rate:={RATE}", "-p", "mode:=lockstep",
                   "-p", "wait_for_subscribers:=2")
         lab.start("controller", "hyst_controller_node", "--ros-args", "-p", f"rate:={RATE}", "-p", "algorithm:=pid",
                   "-p", "reference:=sine:5", "-p", "state_decimation:=10", "-p", "watchdog_periods:=1000000")
-        end = time.monotonic() + 300.0          # until the loop has run ~2 s of stage time
-        while n_ctrl[0] < 200 and time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.05)
-        assert n_ctrl[0] >= 200, lab.log("controller")
-        lab.procs["record"][0].send_signal(signal.SIGINT)
-        assert lab.finish("record", 120) == 0, lab.log("record")
+        # until the loop has run ~2 s of stage time (one /controller/state per 10 samples)
+        assert probe.spin_until(lambda: len(ctrl) >= 200, 300.0), lab.log("controller")
+        lab.stop_recording()
     finally:
         lab.stop()
-        ex.shutdown()
-        probe.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        probe.close()
     s_ns = sorted({_stamp_ns(m) for m in _messages(bag, "/stage/state", JointState)})
     c_ns = sorted({_stamp_ns(m) for m in _messages(bag, "/stage/command", JointState)})
     period = int(round(1e9 / RATE))
