@@ -169,7 +169,7 @@ def test_realtime_bag_with_missed_periods_is_fitted_with_its_notes(tmp_path):
 
     def stall_reported_and_one_more() -> bool:  # then the recorder has the stall's diagnostics too
         idx = [i for i, d in enumerate(diags) for st in d.status
-               if st.name == "hyst_sim: stage" and st.level == st.ERROR and "missed periods" in st.message]
+               if st.name == "hyst_sim: timing" and st.level == st.ERROR and "missed periods" in st.message]
         return bool(idx) and len(diags) > idx[0] + 1
     try:
         lab.record(bag, "/stage/state", "/stage/command", "/diagnostics")
@@ -193,7 +193,7 @@ def test_realtime_bag_with_missed_periods_is_fitted_with_its_notes(tmp_path):
         probe.close()
     shares = [(float({kv.key: kv.value for kv in st.values}["missed_share"]), st.level, st.message)
               for d in _messages(bag, "/diagnostics", DiagnosticArray) for st in d.status
-              if st.name == "hyst_sim: stage"]
+              if st.name == "hyst_sim: timing"]
     worst = max(shares, default=(0.0, None, ""))
     assert worst[0] > 0.1 and worst[1] == b"\x02" and "missed periods" in worst[2], shares
     states = _messages(bag, "/stage/state", JointState)

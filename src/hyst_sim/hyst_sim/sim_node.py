@@ -25,9 +25,9 @@ Modes
     and publishes state ``k+1`` stamped ``(k+1)/rate`` s; commands with any other stamp (duplicates, answers to
     a repeated state) are dropped and counted as stale. Same parameters and seed → same data, bit for bit.
 
-Health on ``/diagnostics`` (every second): the stage held by a mechanical stop (an input the model cannot follow,
-a diverging model) is an ERROR, never a number; missed realtime periods are a WARN with their share of the
-second (an ERROR above 10 %), clipping a WARN. Parameter sets are all or nothing: :meth:`SimNode.set_parameters`
+Health on ``/diagnostics`` (every second): ``hyst_sim: stage`` — the stage on its end stop (an input the model
+cannot follow, a diverging model) is an ERROR, never a number; clipping, timeouts, missed periods a WARN.
+``hyst_sim: timing`` — missed realtime periods with their share of the second (a WARN, an ERROR above 10 %). Parameter sets are all or nothing: :meth:`SimNode.set_parameters`
 and the node's ``set_parameters`` service (rclpy's sets each parameter alone) validate the whole resulting
 configuration and apply every parameter or none.
 """
@@ -386,27 +386,22 @@ class SimNode(Node):
         s, c = self._settings, self._counts
         d = {k: c[k] - self._period_counts[k] for k in c}
         self._period_counts = dict(c)
-        problems, level = [], DiagnosticStatus.OK
-        if d["end_stop"]:
-            level = DiagnosticStatus.ERROR
-        missed_share = d["late_ticks"] / max(1, d["late_ticks"] + d["samples"])
-        if missed_share > _MISSED_ERROR:
-            level = DiagnosticStatus.ERROR
+        problems = []
         if d["clip_range"] or d["clip_slew"] or d["nonfinite"]:
             problems.append(f"clipping ({d['clip_range']} range, {d['clip_slew']} slew, {d['nonfinite']} "
                             f"non-finite in {_DIAG_PERIOD:g} s)")
         if self._timed_out:
             problems.append(f"command timeout: ramping to v_safe = {s.v_safe:g} V")
         if d["late_ticks"]:
-            problems.append(f"{d['late_ticks']} missed periods ({100 * missed_share:.0f} % of the last "
-                            f"{_DIAG_PERIOD:g} s)")
+            problems.append(f"{d['late_ticks']} missed periods")
         if d["bad_messages"]:
             problems.append(f"{d['bad_messages']} malformed commands")
         if d["end_stop"]:
             problems.insert(0, f"FAULT: stage on its end stop in {d['end_stop']} samples (the input drives the "
                                "model outside its travel)")
         st = DiagnosticStatus()
-        st.level = level if level != DiagnosticStatus.OK else (DiagnosticStatus.WARN if problems else level)
+        st.level = DiagnosticStatus.ERROR if d["end_stop"] else (
+            DiagnosticStatus.WARN if problems else DiagnosticStatus.OK)
         st.name = "hyst_sim: stage"
         st.hardware_id = f"sim:{s.profile}"
         st.message = "; ".join(problems) if problems else (
@@ -416,12 +411,25 @@ class SimNode(Node):
                 "clipped_range": c["clip_range"], "clipped_slew": c["clip_slew"],
                 "nonfinite_commands": c["nonfinite"], "malformed_commands": c["bad_messages"],
                 "stale_commands": c["stale"], "timeouts": c["timeouts"], "missed_periods": c["late_ticks"],
-                "missed_share": f"{missed_share:.3f}", "end_stop_samples": c["end_stop"]}
+                "end_stop_samples": c["end_stop"]}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st]
+        arr.status = [st, self._timing_status(d)]
         self._diag_pub.publish(arr)
+
+    def _timing_status(self, d: dict) -> DiagnosticStatus:
+        """The sampler's timing on its own status, so a late sampler does not mask the stage's level."""
+        share = d["late_ticks"] / max(1, d["late_ticks"] + d["samples"])
+        st = DiagnosticStatus(name="hyst_sim: timing", hardware_id=f"sim:{self._settings.profile}")
+        st.level = DiagnosticStatus.ERROR if share > _MISSED_ERROR else (
+            DiagnosticStatus.WARN if d["late_ticks"] else DiagnosticStatus.OK)
+        st.message = (f"{d['late_ticks']} missed periods ({100 * share:.0f} % of the last {_DIAG_PERIOD:g} s)"
+                      if d["late_ticks"] else "no missed periods")
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in (
+            ("missed_periods", self._counts["late_ticks"]), ("missed_share", f"{share:.3f}"),
+            ("achieved_rate_hz", f"{d['samples'] / _DIAG_PERIOD:g}"))]
+        return st
 
     @property
     def counts(self) -> dict:

@@ -275,13 +275,13 @@ def test_parameter_sets_are_all_or_nothing(rig_factory, via):
     assert all(r.successful for r in res) and limits() == ("gma", -5.0, 5.0, -5.0, 5.0, -5.0, 5.0)
 
 
-def _status(rig, cond, timeout=15.0):
+def _status(rig, cond, timeout=15.0, name="hyst_sim: stage"):
     found = []
 
     def check():
         for a in rig.diags:
             for st in a.status:
-                if st.name == "hyst_sim: stage" and cond(st):
+                if st.name == name and cond(st):
                     found.append(st)
         rig.diags.clear()
         return bool(found)
@@ -297,9 +297,10 @@ def test_missed_realtime_periods_are_reported_with_their_share(rig_factory):
     rig = rig_factory(rate=1000.0)
     assert rig.spin_until(lambda: len(rig.states) > 5)
     with rig.node._lock:  # stall the sampler for 0.3 s (the test of a late thread, not a wait): ~300 periods
+        before = rig.node.counts["late_ticks"]
         time.sleep(0.3)
     # all ~300 are counted at once when the sampler wakes, so they land in one diagnostics period
-    st = _status(rig, lambda s: "missed periods" in s.message and int(_values(s)["missed_periods"]) >= 100)
+    st = _status(rig, lambda s: int(_values(s)["missed_periods"]) >= before + 250, name="hyst_sim: timing")
     vals = _values(st)
     share = float(vals["missed_share"])
     assert 0.1 < share < 1.0 and st.level == st.ERROR
@@ -308,9 +309,6 @@ def test_missed_realtime_periods_are_reported_with_their_share(rig_factory):
     # the missed samples are not published in a burst: the stream has a gap, the stamps stay increasing
     stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in rig.states])
     assert np.all(np.diff(stamps) > 0) and np.diff(stamps).max() > 0.2
-    # once the sampler keeps up again, the share of a clean second is below the error line
-    ok = _status(rig, lambda s: float(_values(s)["missed_share"]) < 0.1, timeout=30.0)
-    assert ok.level != ok.ERROR
 
 
 def test_end_stop_is_a_fault_on_diagnostics_not_a_number(rig_factory):
