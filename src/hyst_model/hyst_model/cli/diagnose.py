@@ -32,6 +32,9 @@ def register(subparsers) -> None:
     p.add_argument("--effects", default="", help="only test these effects (comma-separated; default all)")
     p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
                    help="Python file defining extra Effect classes (repeatable)")
+    p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
+                   help="fix an effect's configuration, e.g. dynamics.interp=fft or dynamics.structure=feedback "
+                        "(repeatable; its other variants are then not tried)")
     p.add_argument("--report", metavar="DIR", help="write an HTML report with plots into DIR")
     p.add_argument("--out", metavar="P", help="write the best model of the error ladder as a params file")
     p.add_argument("--force", action="store_true", help="allow --report/--out to replace existing output")
@@ -95,8 +98,11 @@ def run(args: argparse.Namespace) -> int:
     names = [s.strip() for s in args.effects.split(",") if s.strip()] or None
     if names and len(set(names)) != len(names):
         raise EffectError("--effects lists an effect twice")
+    from ..effects import EFFECTS
+    from .fit import parse_config
+    user_cfg = parse_config(args.config, names or sorted(EFFECTS))
     rec = load_checked(args)
-    d = diagnose(rec.t, rec.u, rec.y, base=args.base, effects=names, progress=not args.quiet)
+    d = diagnose(rec.t, rec.u, rec.y, base=args.base, effects=names, progress=not args.quiet, config=user_cfg)
     out_path = None
     if args.out:
         from ..io import spec_from_model, write_params

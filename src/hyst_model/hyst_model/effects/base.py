@@ -127,6 +127,15 @@ class Effect:
         raise NotImplementedError(f"effect {self.name!r} of kind {self.kind!r} must implement apply()")
 
     # --- how it is found ----------------------------------------------------------------------------------
+    @classmethod
+    def data_config(cls, t: np.ndarray, u: np.ndarray, y: np.ndarray, scored: np.ndarray) -> dict:
+        """Configuration this effect takes from the record before fitting (``{"<name>.<key>": value}``).
+
+        ``scored`` marks the samples the fit scores (training). Default: nothing. ``hyst fit`` and
+        ``hyst diagnose`` merge it into the model configuration, so no effect-specific key lives in them.
+        """
+        return {}
+
     def screen_with_refit(self) -> bool:
         """Whether judging this effect needs the base refitted with it (not the fitted base held fixed).
 

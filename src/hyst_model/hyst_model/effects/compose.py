@@ -13,7 +13,7 @@ from ..errors import EffectError
 from ..model import Model
 from .base import ComposedModel, Effect
 
-__all__ = ["EFFECTS", "compose", "register", "effect_names", "Frozen"]
+__all__ = ["EFFECTS", "compose", "register", "effect_names", "Frozen", "effects_data_config"]
 
 #: name → Effect subclass. Filled by :func:`_load_builtins` at import and by :func:`register`.
 EFFECTS: dict[str, type[Effect]] = {}
@@ -136,3 +136,13 @@ class Frozen(Effect):
 
     def check(self, base, others):
         self.effect.check(base, others)
+
+
+def effects_data_config(names: Sequence[str], t, u, y, scored) -> dict:
+    """The configuration each named effect takes from the record (:meth:`Effect.data_config`), merged."""
+    out: dict = {}
+    for n in names:
+        if n not in EFFECTS:
+            raise EffectError(f"unknown effect {n!r}; choose from {', '.join(sorted(EFFECTS))}")
+        out.update(EFFECTS[n].data_config(t, u, y, scored) or {})
+    return out

@@ -36,6 +36,12 @@ class Drift(Effect):
         self.knots = int(float(self._config.get("drift.knots", 5)))
         self.span = float(self._config.get("drift.span", 0.0) or 0.0)
 
+    @classmethod
+    def data_config(cls, t, u, y, scored):
+        """Knots over the span the fit scores (beyond it only the trend carries on)."""
+        ts = np.asarray(t, float)[np.asarray(scored, bool)]
+        return {"drift.span": float(ts[-1] - t[0])} if ts.size else {}
+
     def params(self):
         b = float(self._config.get("offset_bound", 1e-3)) + 50.0 * self.y_scale
         return tuple(Param(f"c{j}", 0.0, -b, b, "m", f"offset change at knot {j} of {self.knots}")

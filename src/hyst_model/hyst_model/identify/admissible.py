@@ -13,7 +13,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-__all__ = ["Admissibility", "check_admissible"]
+from ..model import Model
+
+__all__ = ["Admissibility", "check_admissible", "AdmissibleModel", "fit_admissible", "MARGIN"]
 
 
 @dataclass
@@ -68,3 +70,78 @@ def check_admissible(model, theta, rel: float = 1e-6) -> Admissibility:
     else:
         verdict = "the controllers can use it (Remark 4.1 holds: μ stays positive)"
     return Admissibility(not bad, bad, at, verdict)
+
+
+#: Smallest margin α + |ψ| < −MARGIN the constrained fit keeps (in the model's normalised units).
+MARGIN = 1e-4
+
+
+class AdmissibleModel(Model):
+    """A model reparameterised so that Remark 4.1 holds by construction: α_i = −|ψ_i| − m_i, m_i ≥ MARGIN.
+
+    Same parameters as the wrapped model except each ``alpha<i>`` with a ``psi<i>`` partner is replaced by
+    ``alpha<i>_margin`` (m_i). :meth:`inner` maps a packed θ' back to the wrapped model's θ, so the result is an
+    ordinary model of the same name (params files, controllers unchanged). Works for MBW/BW bases and composed
+    models on them (the names are the same there).
+    """
+
+    def __init__(self, model):
+        from ..model import Param
+        self.model = model
+        self.name = model.name
+        names = list(model.names)
+        self.pairs = [(names.index(a), names.index(p)) for a, p in (("alpha1", "psi1"), ("alpha2", "psi2"))
+                      if a in names and p in names]
+        if not self.pairs:
+            raise ValueError("no alpha/psi pair to constrain (Remark 4.1 applies to MBW and BW bases)")
+        lo, _ = model.bounds
+        ps = list(model.params())
+        for ia, ip in self.pairs:
+            p, q = ps[ia], ps[ip]
+            top = max(-float(lo[ia]), MARGIN * 10)  # α ≥ its lower bound ⇒ m ≤ −lo − |ψ| ≤ −lo
+            # |ψ| < −lo(α): otherwise no α within its bounds is below −|ψ| (α is clipped at lo(α) in inner())
+            lim = top - MARGIN
+            ps[ip] = Param(q.name, float(np.clip(q.default, -lim, lim)), max(q.lower, -lim), min(q.upper, lim),
+                           q.unit, q.doc)
+            ps[ia] = Param(f"{p.name}_margin", max(MARGIN, -p.default - abs(ps[ip].default)), MARGIN, top, p.unit,
+                           f"how far {p.name} stays below −|{ps[ip].name}| (Remark 4.1)")
+        self._params = tuple(ps)
+
+    def params(self):
+        return self._params
+
+    def config(self):
+        return self.model.config()
+
+    def inner(self, theta_c) -> np.ndarray:
+        """θ of the wrapped model (α from ψ and the margin, clipped to α's own lower bound)."""
+        th = np.asarray(theta_c, dtype=np.float64).copy()
+        lo, _ = self.model.bounds
+        for ia, ip in self.pairs:
+            th[ia] = max(-abs(th[ip]) - th[ia], lo[ia])
+        return th
+
+    def outer(self, theta) -> np.ndarray:
+        """The nearest admissible θ' for a wrapped θ (margins at least :data:`MARGIN`)."""
+        th = np.asarray(theta, dtype=np.float64).copy()
+        for ia, ip in self.pairs:
+            th[ia] = max(-th[ia] - abs(th[ip]), MARGIN)
+        lo, hi = self.bounds
+        return np.clip(th, lo, hi)
+
+    def simulate(self, theta_c, t, u):
+        return self.model.simulate(self.inner(theta_c), t, u)
+
+
+def fit_admissible(model, t, u, y, theta, split, max_nfev: int = 150):
+    """Refit ``model`` from ``theta`` (a free fit) with Remark 4.1 enforced; returns (θ of ``model``, result).
+
+    The free optimum is projected onto the admissible set (each α pushed below −|ψ| by at least the margin)
+    and the output-error least squares continues from there in the reparameterised model
+    (:class:`AdmissibleModel`), so the answer always satisfies α_i < −|ψ_i|; its validation RMSE is what the
+    constraint costs on these data.
+    """
+    from . import fit
+    am = AdmissibleModel(model)
+    res = fit(am, t, u, y, method="fast", split=split, theta0=am.outer(theta), max_nfev=max_nfev)
+    return am.inner(res.theta), res

@@ -1,0 +1,242 @@
+"""The fitting machinery of :func:`hyst_model.diagnose.diagnose.diagnose`: the hold-out, the paired test, refits.
+
+Every refit starts from the best point found so far and returns a model no worse on validation than that start
+(:func:`guarded_refit`); effects are screened on top of a fitted model held fixed (:class:`Fixed`).
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..errors import DataError, EffectError, FitError
+from ..effects import EFFECTS, compose
+from ..effects.base import ComposedModel
+from ..model import Model
+
+__all__ = ["MIN_TRAIN", "MIN_VALID", "SPLIT", "BLOCKS", "validation_mask", "default_fitter", "refit",
+           "guarded_refit", "candidate_names", "Fixed", "paired_t", "rmse"]
+
+#: Fewest samples for training / validation; below → FitError("too little data for validation").
+MIN_TRAIN = 700
+MIN_VALID = 300
+#: Validation fraction, held out in :data:`BLOCKS` interleaved blocks (as ``hyst fit``'s default).
+SPLIT = 0.25
+#: Interleaved validation blocks (see :func:`validation_mask`).
+BLOCKS = 8
+
+
+
+def validation_mask(n: int) -> np.ndarray:
+    """True on the held-out validation samples: :data:`SPLIT` of the record in :data:`BLOCKS` interleaved blocks.
+
+    A tail hold-out validates only what the record does last — the highest frequencies of a sweep, the
+    smallest triangles, one sine — so a model fitted on the rest must extrapolate there, and an effect that
+    shows only elsewhere is never seen in validation. Interleaved blocks (:func:`hyst_model.identify.block_mask`)
+    sample every part of the excitation; the fit never scores them (``split=mask``).
+    """
+    from ..identify.result import block_mask
+    return block_mask(n, SPLIT, BLOCKS)
+
+
+def rmse(e: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(e * e))) if e.size else float("nan")
+
+
+def paired_t(e_base: np.ndarray, e_new: np.ndarray, chunks: int = 40) -> float:
+    """Robust t statistic of the squared-error reduction mean(e_base² − e_new²) over contiguous chunks.
+
+    Residuals are correlated in time, so the reduction is averaged per chunk. Its spread is taken from the
+    median absolute deviation of the chunk means: a real effect often shows in a few chunks only (a delay only
+    where the input moves), which would inflate a plain standard deviation and hide it, while chunks where
+    neither model errs beyond noise measure the chance fluctuation.
+    """
+    d = e_base * e_base - e_new * e_new
+    parts = np.array_split(d, chunks)
+    means = np.array([p.mean() for p in parts if p.size])
+    if means.size < 5:
+        return 0.0
+    scale = 1.4826 * float(np.median(np.abs(means - np.median(means))))
+    scale = max(scale, 1e-3 * float(np.std(means)), 1e-300)
+    return float(np.mean(means) / (scale / math.sqrt(means.size)))
+
+
+def _simulate(model: Model, theta, t, u) -> np.ndarray:
+    with np.errstate(all="ignore"):
+        yhat = np.asarray(model.simulate(theta, t, u), dtype=np.float64)
+    if not np.all(np.isfinite(yhat)):
+        raise FitError(f"{model.name}: the fitted model diverges on this record")
+    return yhat
+
+
+def default_fitter(model: Model, t, u, y, theta0: np.ndarray | None) -> np.ndarray:
+    """Fit with :func:`hyst_model.identify.fit` on the training window; returns θ.
+
+    Without a start: the fast method (equation-error starts + output-error least squares); with one: the fast
+    method's output-error Levenberg-Marquardt from it (on the hidden saturation bag it reaches the noise floor,
+    2.07 nm, in 0.8 s where scipy's trust-region solver stopped at 49.5 nm after 7.3 s). Both use the same
+    split, so validation numbers match ``hyst fit``.
+    """
+    from .. import identify  # late: identification imports models; keep diagnose importable on its own
+    split = validation_mask(np.asarray(t).size)
+    if theta0 is None:
+        res = identify.fit(model, t, u, y, method="fast", split=split)
+    else:
+        res = identify.fit(model, t, u, y, method="fast", split=split, theta0=theta0, max_nfev=80)
+    return np.asarray(res.theta, dtype=np.float64)
+
+
+def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_base: np.ndarray,
+          carry: dict | None = None, fitter=None, two_stage: bool = True, prior: dict | None = None
+          ) -> tuple[ComposedModel, np.ndarray, np.ndarray]:
+    """Fit base + effects in two stages; return (model, θ, free-run prediction).
+
+    1. Each effect's data-driven start (:meth:`Effect.start` on the base model's residual) — parameters it does
+       not provide come from ``prior`` (e.g. the screening level's fit: effect parameters are physical, so they
+       carry across sample rates; base parameters do not) — overridden by ``carry`` (values of an earlier fit
+       at this rate, e.g. the previous rung of the ladder);
+    2. for input-side effects (delay), the base refitted on the input as the effect transforms it at its start
+       (a base fitted without the effect is distorted by it — its δ terms imitate a delay — and a joint fit
+       from there stalls in that basin);
+    3. everything jointly from there.
+
+    With ``two_stage=False`` step 2 is skipped — for refits whose effect parameters are already good (carried
+    from the screening level), where the joint fit alone converges and costs a fraction.
+    """
+    fitter = fitter or default_fitter
+    m = compose(base_model, list(names), cfg)
+    if prior:  # lowest precedence: values an effect's own start does not provide
+        nm = m.names
+        for e in m.effects:
+            pre = {p.name: prior[f"{e.name}.{p.name}"] for p in e.params() if f"{e.name}.{p.name}" in prior}
+            base_start = e.start
+            e.start = (lambda f, pre: lambda *a: {**pre, **(f(*a) or {})})(base_start, pre)
+    th0 = m.start(t, u, y, theta_base)
+    if carry:
+        nm = m.names
+        for k, v in carry.items():
+            if k in nm and "." in k:
+                th0[nm.index(k)] = v
+        lo, hi = m.bounds
+        th0 = np.clip(th0, lo, hi)
+    th1 = th0
+    inputs = [(e, te) for e, te in zip(m.effects, m.split(th0)[1]) if e.kind == "input"]
+    if two_stage and inputs:
+        # The base around the input effects at their start: the base alone on the transformed input, with
+        # the base model's own fast fitter (equation-error starts, exact Jacobian).
+        uu = u
+        for e, te in inputs:
+            uu = e.input(te, t, uu)
+        th1 = th0.copy()
+        th1[: len(base_model.names)] = fitter(base_model, t, uu, y, None)
+    th = fitter(m, t, u, y, th1)
+    return m, th, _simulate(m, th, t, u)
+
+
+def _point(m: Model, values: dict) -> np.ndarray:
+    """Packed θ of ``m`` from named values (others at their defaults), clipped to the bounds."""
+    th = np.asarray(m.theta0, dtype=np.float64).copy()
+    names = m.names
+    for k, v in values.items():
+        if k in names and np.isfinite(v):
+            th[names.index(k)] = v
+    lo, hi = m.bounds
+    return np.clip(th, lo, hi)
+
+
+def guarded_refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, val: np.ndarray,
+                  start: dict, **refit_kw) -> tuple[ComposedModel, np.ndarray, np.ndarray]:
+    """:func:`refit`, but never worse on validation than the point it starts from.
+
+    ``start`` names the best model found so far (the base or previous rung's parameters plus the screened
+    effect's values). A joint refit that ends worse than that point — a local minimum, a fitter stopped early —
+    is discarded and the start kept; a refit that fails keeps the start too. Identification never goes backwards.
+    """
+    m = compose(base_model, list(names), cfg)
+    th_s = _point(m, start)
+    try:
+        yh_s = _simulate(m, th_s, t, u)
+    except FitError:
+        yh_s = None
+    try:
+        m2, th, yh = refit(base_model, names, cfg, t, u, y, **refit_kw)
+    except (FitError, EffectError):
+        if yh_s is None:
+            raise
+        return m, th_s, yh_s
+    if yh_s is not None and rmse((y - yh_s)[val]) < rmse((y - yh)[val]):
+        return m, th_s, yh_s
+    return m2, th, yh
+
+
+def _scales(u: np.ndarray, y: np.ndarray) -> dict:
+    """Normalisation for the base model (:func:`hyst_model.models.data_config`)."""
+    from ..models import data_config
+    if not (np.ptp(u) > 0 and np.ptp(y) > 0):
+        raise DataError("the input or the output never changes: nothing to identify")
+    return data_config(u, y)
+
+
+class _Progress:
+    def __init__(self, enabled: bool, total: int):
+        self.enabled, self.total, self.i, self.t0 = enabled, total, 0, time.perf_counter()
+
+    def __call__(self, msg: str, step: bool = True) -> None:
+        if step:
+            self.i += 1
+        if self.enabled:
+            print(f"[diagnose {self.i}/{self.total} {time.perf_counter() - self.t0:5.1f}s] {msg}",
+                  file=sys.stderr, flush=True)
+
+
+def candidate_names(base_model: Model, names: Sequence[str] | None = None) -> list[str]:
+    """Effects that can extend ``base_model`` (all registered ones, or the given ones after checking)."""
+    pool = list(names) if names else sorted(EFFECTS)
+    out = []
+    for n in pool:
+        if n not in EFFECTS:
+            raise EffectError(f"unknown effect {n!r}; choose from {', '.join(sorted(EFFECTS))}")
+        try:
+            compose(base_model, [n])
+        except EffectError:
+            if names:
+                raise
+            continue
+        out.append(n)
+    return out
+
+
+class Fixed(Model):
+    """A fitted model held fixed, except its output offset: the inner model for screening an effect on top.
+
+    Screening an effect with everything else frozen costs a few parameters' fit at full rate (the base's
+    per-sample parameters must not be decimated); the effect's own parameters plus the offset are free.
+    """
+
+    def __init__(self, model: Model, theta: np.ndarray):
+        self.model, self.theta = model, np.asarray(theta, dtype=np.float64)
+        self.name = model.name
+        self._off = model.names.index("offset") if "offset" in model.names else None
+        self._params = tuple(p for p in model.params() if p.name == "offset")
+        if self._off is not None:
+            p = self._params[0]
+            self._params = (type(p)(p.name, float(self.theta[self._off]), p.lower, p.upper, p.unit, p.doc),)
+
+    def params(self):
+        return self._params
+
+    def config(self):
+        return self.model.config()
+
+    def simulate(self, theta, t, u):
+        th = self.theta.copy()
+        if self._off is not None:
+            th[self._off] = theta[0]
+        return self.model.simulate(th, t, u)
+
+
+def _effect_values(m: Model, th: np.ndarray, only: str | None = None) -> dict:
+    return {k: v for k, v in m.unpack(th).items() if "." in k and (only is None or k.startswith(only + "."))}

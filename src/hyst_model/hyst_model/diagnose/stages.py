@@ -1,0 +1,336 @@
+"""The stages of :func:`hyst_model.diagnose.diagnose.diagnose`: screen → refit → ladder → verdict.
+
+Each stage reads the fitted base and the record from a :class:`Setup` and returns plain results; the
+orchestration (checks, the base fit, the :class:`~hyst_model.diagnose.diagnose.Diagnosis`) is in ``diagnose.py``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import EffectError, FitError
+from ..effects import EFFECTS, compose
+from ..effects.signals import fmt_len
+from ..model import Model
+from .refit import Fixed, _effect_values, _simulate, guarded_refit, paired_t, refit, rmse
+from .unexplained import Unexplained, explain_unexplained
+
+__all__ = ["Candidate", "Rung", "Setup", "screen_all", "refit_all", "climb", "verdict"]
+
+
+@dataclass
+class Candidate:
+    """One effect tested against the data.
+
+    Attributes
+    ----------
+    effect : str
+    rmse : float
+        Validation RMSE of base + effect (m).
+    rmse_train : float
+    improvement : float
+        Baseline validation RMSE / this RMSE (> 1 is better).
+    significant : bool
+        Passes the margin and the paired test.
+    score : float
+        Residual-signature score in [0, 1].
+    evidence : str
+        Why, in words.
+    t_stat : float
+        Paired t statistic of the squared-error reduction on validation chunks.
+    params : dict
+        Fitted effect parameters (namespaced).
+    """
+
+    effect: str
+    rmse: float
+    rmse_train: float
+    improvement: float
+    significant: bool
+    score: float
+    evidence: str
+    t_stat: float = 0.0
+    params: dict = field(default_factory=dict)
+    on_top_of: list = field(default_factory=list)
+
+
+@dataclass
+class Rung:
+    """One step of the error ladder."""
+
+    model: str
+    effects: list
+    rmse: float
+    rmse_train: float
+
+
+@dataclass
+class Setup:
+    """What every stage reads: the record, the hold-out, the configuration and the fitted base."""
+
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    val: np.ndarray
+    dt: float
+    cfg: dict
+    fixed: dict
+    base: str
+    base_model: Model
+    names: list
+    fit: Callable
+    say: Callable
+    noise: float
+    th_base: np.ndarray
+    e_base: np.ndarray
+    min_factor: float
+    t_min: float
+    noise_margin: float
+    full_rate_top: int
+    max_rungs: int
+
+    @property
+    def train(self) -> np.ndarray:
+        return ~self.val
+
+    @property
+    def base_val(self) -> float:
+        return rmse(self.e_base[self.val])
+
+    @property
+    def at_floor(self) -> bool:
+        return self.base_val <= self.noise_margin * self.noise
+
+
+def screen_on(s: Setup, inner: Model, th_inner: np.ndarray, chosen: list, nm: str, prior: dict | None):
+    """Fit effect ``nm`` on top of ``inner`` held fixed (its effect parameters + the offset); return
+    (validation RMSE, effect values, (model, θ, residual) if it was a full refit else None).
+
+    Effects that say so (:meth:`Effect.screen_with_refit`: they replace the base recursion or transform its
+    input, or the base imitates them) get the joint refit instead — with the base held fixed they look useless.
+    """
+    t, u, y, val = s.t, s.u, s.y, s.val
+    if compose(s.base_model, [nm], s.cfg).effects[-1].screen_with_refit():
+        m, th, yh = refit(s.base_model, chosen + [nm], s.cfg, t, u, y, s.th_base, prior, s.fit)
+        return rmse((y - yh)[val]), _effect_values(m, th, nm), (m, th, y - yh)
+    fx = Fixed(inner, th_inner)
+    m = compose(fx, [nm], s.cfg)
+    th0 = m.start(t, u, y, fx.theta0)
+    if prior:
+        for k, v in prior.items():
+            if k in m.names:
+                th0[m.names.index(k)] = v
+    th = s.fit(m, t, u, y, np.clip(th0, *m.bounds))
+    vals = _effect_values(m, th, nm)
+    if "offset" in m.names:  # the screen refits the offset too: part of the point a refit starts from
+        vals["offset"] = float(th[m.names.index("offset")])
+    return rmse((y - _simulate(m, th, t, u))[val]), vals, None
+
+
+def _label(vv: dict) -> str:
+    return ", ".join(f"{k.split('.', 1)[-1]} {v}" for k, v in vv.items())
+
+
+def screen_all(s: Setup) -> tuple[dict, dict, dict]:
+    """Stage 1: each candidate alone on top of the fitted base, in each of its variants (the better kept).
+
+    Returns ``(candidates, carry, full)``: Candidate by name; each one's fitted effect values (the point its
+    refit starts from); and (model, θ, residual) of candidates whose screen already was a joint refit.
+    """
+    cands: dict[str, Candidate] = {}
+    carry: dict[str, dict] = {}
+    full: dict[str, tuple] = {}
+    base_val = s.base_val
+    for nm in s.names:
+        tc = time.perf_counter()
+        probe = compose(s.base_model, [nm], s.cfg)
+        try:
+            score, ev = probe.effects[-1].signature(s.t, s.u, s.e_base, s.dt)
+            score = float(np.clip(score, 0.0, 1.0))
+        except Exception as err:  # noqa: BLE001 - a user effect's test must not sink the diagnosis
+            score, ev = 0.0, f"its residual test failed ({type(err).__name__}: {err})"
+        variants = list(getattr(EFFECTS[nm], "variants", lambda: [{}])()) or [{}]
+        variants = [v for v in variants if not any(k in s.fixed and s.fixed[k] != x for k, x in v.items())] or [{}]
+        tried: list[tuple[float, dict, dict, tuple | None]] = []
+        errors = []
+        for var in variants:  # e.g. dynamics in both structures: keep whichever validates better
+            s.cfg.update(var)  # an effect reads only its own "<name>.*" keys, so the shared config can carry it
+            try:
+                r_v, vals_v, done_v = screen_on(s, s.base_model, s.th_base, [], nm, None)
+                tried.append((r_v, var, vals_v, done_v))
+            except (FitError, EffectError) as err:
+                errors.append(str(err))
+        if tried:
+            r, var, vals, done = min(tried, key=lambda x: x[0])
+            s.cfg.update(var)
+            carry[nm] = vals
+            if done is not None:
+                full[nm] = done
+            if len(tried) > 1:
+                ev += ("; tried " + " and ".join(f"{_label(vv)} ({fmt_len(rv)} on validation)"
+                                                 for rv, vv, _, _ in tried) + f": kept {_label(var)}")
+        else:
+            r = math.inf
+            ev = f"{ev}; the fit failed: {'; '.join(errors)}"
+        cands[nm] = Candidate(nm, r, math.nan, base_val / r if r > 0 else math.inf, False, score, ev,
+                              params=carry.get(nm, {}))
+        s.say(f"screen {s.base}+{nm}: validation RMSE {fmt_len(r)} ({base_val / r:.2f}×), residual test "
+              f"{score:.2f}, {time.perf_counter() - tc:.1f} s")
+    return cands, carry, full
+
+
+def refit_all(s: Setup, cands: dict, carry: dict, full: dict) -> list:
+    """Stage 2: every candidate refitted jointly with the base from its screened point (never worse than that
+    point), then marked significant or not; returns the candidates ranked (significant first, by RMSE).
+
+    Screened with the base held fixed, an effect the base partly imitates (an output nonlinearity its ψ/α
+    terms bend towards, a delay its δ terms mimic) can look useless, or even worse than the base, and still
+    take the error to the noise floor once refitted with it (the hidden asymmetry bag: 0.95× screened, 27×
+    refitted) — so all of them are refitted, not only the best screened.
+    """
+    t, u, y, val, train = s.t, s.u, s.y, s.val, s.train
+    order = sorted(cands.values(), key=lambda c: c.rmse)
+    for c in order:
+        if c.effect in full or not np.isfinite(c.rmse):
+            continue
+        try:
+            m, th, yh = guarded_refit(s.base_model, [c.effect], s.cfg, t, u, y, val,
+                                      {**s.base_model.unpack(s.th_base), **carry.get(c.effect, {})},
+                                      theta_base=s.th_base, fitter=s.fit, prior=carry.get(c.effect))
+        except (FitError, EffectError):
+            continue
+        full[c.effect] = (m, th, y - yh)
+        s.say(f"refit {m.name}: validation RMSE {fmt_len(rmse((y - yh)[val]))}")
+    for c in order:
+        if c.effect not in full:
+            c.evidence += " (screened with the base model held fixed: its joint refit failed)"
+    base_val = s.base_val
+    for nm, (m, th, e) in full.items():
+        c = cands[nm]
+        # The refit started from the screened point and kept it if it could not improve on it, so its numbers
+        # (and its paired test) stand for the candidate even where the screen's offset differed slightly.
+        c.rmse, c.rmse_train = rmse(e[val]), rmse(e[train])
+        c.improvement = base_val / c.rmse if c.rmse > 0 else math.inf
+        c.t_stat = paired_t(s.e_base[val], e[val])
+        c.params = _effect_values(m, th)
+        carry[nm] = c.params
+    for c in cands.values():
+        c.significant = bool(not s.at_floor and c.effect in full and c.improvement >= s.min_factor
+                             and c.t_stat >= s.t_min)
+    return sorted(cands.values(), key=lambda c: (not c.significant, c.rmse))
+
+
+def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict) -> tuple[list, dict, list]:
+    """Stage 3: the error ladder — the best significant effect, then, while the error is above the noise floor,
+    the best further effect screened on top of the current rung and refitted (``full_rate_top`` of them).
+
+    Returns ``(ladder, models, chosen)``: the rungs, (model, θ) by model name, the effects in order.
+    """
+    t, u, y, val, train = s.t, s.u, s.y, s.val, s.train
+    ladder = [Rung(s.base, [], s.base_val, rmse(s.e_base[train]))]
+    models: dict[str, tuple] = {s.base: (s.base_model, s.th_base)}
+    chosen: list[str] = []
+    if not (ranked and ranked[0].significant):
+        return ladder, models, chosen
+    best = ranked[0]
+    m, th, e = full[best.effect]
+    chosen.append(best.effect)
+    ladder.append(Rung(m.name, list(chosen), best.rmse, best.rmse_train))
+    models[m.name] = (m, th)
+    cur_e = e
+    while len(chosen) < s.max_rungs:
+        cur_val = rmse(cur_e[val])
+        if cur_val <= s.noise_margin * s.noise:
+            break
+        # A second effect is often masked by the first when tested alone: screen every remaining one on top of
+        # the current rung, then refit the best at full rate.
+        prev_m, prev_th = models[ladder[-1].model]
+        trial_s = []
+        for nm in s.names:
+            if nm in chosen:
+                continue
+            try:
+                compose(s.base_model, chosen + [nm], s.cfg)
+                r_s, vals, _ = screen_on(s, prev_m, prev_th, chosen, nm, carry.get(nm))
+            except (EffectError, FitError):
+                continue
+            trial_s.append((r_s, nm, vals))
+            s.say(f"screen {prev_m.name}+{nm}: validation RMSE {fmt_len(r_s)}", step=False)
+        trial_s.sort(key=lambda x: x[0])
+        trial = []
+        for r_s, nm, vals in trial_s[:s.full_rate_top]:
+            if not cur_val / r_s >= 1.0:
+                continue
+            try:
+                mm, tth, yh = guarded_refit(s.base_model, chosen + [nm], s.cfg, t, u, y, val,
+                                            {**prev_m.unpack(prev_th), **vals},
+                                            theta_base=prev_m.split(prev_th)[0],
+                                            carry=_effect_values(prev_m, prev_th), fitter=s.fit, prior=vals)
+            except (EffectError, FitError):
+                continue
+            trial.append((rmse((y - yh)[val]), nm, mm, tth, y - yh))
+            s.say(f"refit {mm.name}: validation RMSE {fmt_len(trial[-1][0])}")
+        if not trial:
+            break
+        r, nm, mm, tth, e = min(trial, key=lambda x: x[0])
+        if not (cur_val / r >= s.min_factor and paired_t(cur_e[val], e[val]) >= s.t_min):
+            break
+        c = cands[nm]
+        c.on_top_of, c.rmse, c.rmse_train = list(chosen), r, rmse(e[train])
+        c.improvement, c.t_stat, c.significant = cur_val / r, paired_t(cur_e[val], e[val]), True
+        c.params = _effect_values(mm, tth, nm)
+        chosen.append(nm)
+        ladder.append(Rung(mm.name, list(chosen), r, rmse(e[train])))
+        models[mm.name] = (mm, tth)
+        cur_e = e
+    return ladder, models, chosen
+
+
+def verdict(s: Setup, cands: dict, ladder: list, models: dict, chosen: list, unexplained_factor: float,
+            explain: Callable) -> tuple[list, str, Unexplained | None, str]:
+    """Stage 4: the answer — candidates best first, the missing effect (``none``/``unexplained`` included),
+    the description of an unexplained remainder, and the explanation in words.
+
+    ``explain(candidate, base, rmse_it_improves_on)`` writes each candidate's evidence sentence.
+    """
+    base, noise, base_val = s.base, s.noise, s.base_val
+    # Best first: the ladder's effects in the order they were added, then the rest by validation RMSE.
+    ranked = [cands[nm] for nm in chosen] + sorted((c for c in cands.values() if c.effect not in chosen),
+                                                   key=lambda c: (not c.significant, c.rmse))
+    rung_val = {tuple(rg.effects): rg.rmse for rg in ladder}
+    for c in ranked:
+        c.evidence = explain(c, base, rung_val.get(tuple(c.on_top_of), base_val))
+    missing = chosen[0] if chosen else "none"
+    left = ladder[-1].rmse
+    unexplained = None
+    if left >= unexplained_factor * noise:
+        e_last = s.y - _simulate(*models[ladder[-1].model], s.t, s.u)
+        # Learn the loop-shape function on the first half of the held-out samples, test it on the second: both
+        # halves are out of sample for the model (its training residual is fitted away and says little).
+        vi = np.flatnonzero(s.val)
+        first = np.zeros(vi.size, dtype=bool)
+        first[: vi.size // 2] = True
+        unexplained = explain_unexplained(s.u[vi], e_last[vi], first, left, noise, base,
+                                          [nm for nm in s.names if nm not in chosen])
+        if not chosen:
+            missing = "unexplained"
+    if s.at_floor:
+        expl = (f"the {base} model already predicts held-out data to {fmt_len(base_val)} RMS, at the sensor "
+                f"noise floor ({fmt_len(noise)}): no effect is missing")
+    elif not chosen:
+        expl = (f"the {base} model leaves {fmt_len(base_val)} RMS (noise floor {fmt_len(noise)}), but no candidate "
+                f"predicts held-out data significantly better (needs ≥ {s.min_factor:g}× and paired t ≥ "
+                f"{s.t_min:g}); the remaining error is none of: {', '.join(s.names)}")
+        if unexplained is not None:
+            expl = f"unexplained ({unexplained.kind}): {unexplained.evidence}"
+    else:
+        expl = " → ".join(f"{r.model} {fmt_len(r.rmse)}" for r in ladder)
+        expl += (" (at the noise floor)" if left <= s.noise_margin * noise else
+                 f" (still {left / noise:.1f}× the noise floor: something else is missing too)")
+        if unexplained is not None:
+            expl += f"; what is left is {unexplained.kind}: {unexplained.evidence}"
+    return ranked, missing, unexplained, expl

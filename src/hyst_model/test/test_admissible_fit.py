@@ -1,0 +1,48 @@
+"""The constrained fit (hyst fit --admissible): Remark 4.1 holds by construction, at a stated cost."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hyst_model.identify.admissible import MARGIN, AdmissibleModel, check_admissible
+from hyst_model.spec import build_model
+
+PIEZO = Path(__file__).resolve().parents[4] / "shared" / "data" / "piezo_150V_1Hz" / "piezo_150V_1Hz.csv"
+
+
+def _mbw():
+    return build_model("mbw", (), {"u_scale": 15.0, "y_scale": 5e-6, "dt": 1e-3})
+
+
+def test_every_reparameterised_point_is_admissible_and_admissible_points_map_to_themselves():
+    m = _mbw()
+    am = AdmissibleModel(m)
+    assert "alpha1_margin" in am.names and "alpha2_margin" in am.names and "alpha1" not in am.names
+    rng = np.random.default_rng(0)
+    lo, hi = am.bounds
+    for _ in range(500):
+        th = am.inner(rng.uniform(lo, hi))
+        v = m.unpack(th)
+        assert v["alpha1"] < -abs(v["psi1"]) and v["alpha2"] < -abs(v["psi2"]), v
+    good = m.pack({**m.unpack(m.theta0), "psi1": 0.02, "alpha1": -0.05, "psi2": -0.01, "alpha2": -0.03})
+    np.testing.assert_allclose(am.inner(am.outer(good)), good, rtol=1e-12)
+    bad = m.pack({**m.unpack(m.theta0), "psi1": 0.02, "alpha1": 0.01})
+    fixed = m.unpack(am.inner(am.outer(bad)))
+    assert fixed["alpha1"] == pytest.approx(-0.02 - MARGIN)
+
+
+@pytest.mark.skipif(not PIEZO.exists(), reason=f"shared data not present ({PIEZO})")
+def test_real_piezo_admissible_fit_reports_both_figures(capsys):
+    from hyst_model.cli.main import main
+    base = ["fit", str(PIEZO), "--columns", "t_s,voltage_V,displacement_um", "--units", "s,V,um", "--json", "--quiet"]
+    assert main(base) == 0
+    free = json.loads(capsys.readouterr().out)
+    assert free["admissibility"]["remark_4_1"] is False  # this record's free fit violates Remark 4.1
+    assert main(base + ["--admissible"]) == 0
+    c = json.loads(capsys.readouterr().out)
+    assert c["admissibility"]["remark_4_1"] is True and not c["admissibility"]["violations"]
+    assert c["constrained"]["free_rmse"] == pytest.approx(free["rmse"], rel=1e-6)
+    assert free["rmse"] <= c["rmse"] < 3 * free["rmse"]
+    m = build_model("mbw", (), {"u_scale": 1.0, "y_scale": 1.0})
+    assert check_admissible(m, m.pack(c["params"])).remark_4_1
