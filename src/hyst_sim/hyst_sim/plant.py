@@ -39,13 +39,17 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
-from hyst_model.core import MBWParams, mbw_rest_state, mbw_step
+from hyst_model.core import MBWParams, mbw_rest_state
 
 from .errors import ConfigError, SimError
-from .profiles import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, clip_kernel, get_profile
-from .truth_effects import Effects, asymmetry_kernel, creep_kernel, dynamics_kernel, saturation_kernel
+from .plant_kernel import (F_ASYM, F_CREEP, F_DA, F_DELAY, F_DQ, F_DR, F_DT, F_DW, F_DYN, F_HALF, F_NOISE, F_OFF,
+                           F_QUANT, F_SAT, F_SATHI, F_SATLO, F_SATW, F_STEP, F_SUB, F_US, F_VMAX, F_VMIN, F_XMID,
+                           F_YS, F_YSTOPHI, F_YSTOPLO, N_F, S_DIDX, S_DT_T, S_T, S_UA, S_UM, S_X, S_XQ, S_Y,
+                           _plant_loop)
+from .profiles import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, get_profile
+from .stroke import check_bounded, rest_stroke
+from .truth_effects import Effects, asymmetry_kernel, saturation_kernel
 
 __all__ = ["PlantConfig", "Plant", "StepResult", "RunResult", "CLIP_RANGE", "CLIP_SLEW", "CLIP_NONFINITE", "AT_STOP",
            "STOP_MARGIN"]
@@ -231,72 +235,6 @@ class RunResult(NamedTuple):
         return (self.flags & AT_STOP) != 0
 
 
-# Indices into the packed float settings (_F) and state (_S) arrays of the compiled loop.
-(F_US, F_YS, F_OFF, F_VMIN, F_VMAX, F_STEP, F_SUB, F_ASYM, F_XMID, F_HALF, F_CREEP, F_SAT, F_SATLO, F_SATHI,
- F_SATW, F_DYN, F_DR, F_DA, F_DW, F_DQ, F_NOISE, F_QUANT, F_DT, F_DELAY, F_YSTOPLO, F_YSTOPHI) = range(26)
-(S_Y, S_UM, S_UA, S_T, S_DRIFT, S_DT_T, S_DIDX, S_XQ, S_X) = range(9)
-
-
-@njit(cache=True)
-def _plant_loop(u_cmd, p, f, st, creep_a, creep_c, phi, gam, dz, dbuf, normals, out_y, out_u, out_f, out_x):
-    """Advance the plant over ``u_cmd`` (V); states are updated in place (see the module signal chain)."""
-    n_delay = int(f[F_DELAY])
-    n_sub = int(f[F_SUB])
-    for k in range(u_cmd.shape[0]):
-        ua, flags = clip_kernel(u_cmd[k], f[F_VMIN], f[F_VMAX], st[S_UA], f[F_STEP])
-        st[S_UA] = ua
-        ue = ua
-        if n_delay > 0:
-            i = int(st[S_DIDX])
-            ue = dbuf[i]
-            dbuf[i] = ua
-            st[S_DIDX] = (i + 1) % n_delay
-        um = ue / f[F_US]
-        y = st[S_Y]
-        up = st[S_UM]
-        for _ in range(n_sub):
-            y = mbw_step(p, y, um, up)
-            up = um
-        # The stage cannot leave its travel. A non-finite state is a numerical break, not physics: it is left
-        # to _advance, which raises SimError so the node resets instead of publishing a stop position.
-        if y < f[F_YSTOPLO] and math.isfinite(y):
-            y = f[F_YSTOPLO]
-            flags |= 8
-        elif y > f[F_YSTOPHI] and math.isfinite(y):
-            y = f[F_YSTOPHI]
-            flags |= 8
-        st[S_Y] = y
-        st[S_UM] = um
-        x = f[F_YS] * y + f[F_OFF]
-        if f[F_ASYM] != 0.0:
-            x = asymmetry_kernel(x, f[F_ASYM], f[F_XMID], f[F_HALF])
-        st[S_XQ] = x
-        if f[F_CREEP] != 0.0:
-            x = creep_kernel(x, creep_c, creep_a, f[F_CREEP])
-        if f[F_SAT] != 0.0:
-            x = saturation_kernel(x, f[F_SATLO], f[F_SATHI], f[F_SATW])
-        if f[F_DYN] != 0.0:
-            x = dynamics_kernel(dz, phi, gam, x)
-        st[S_X] = x
-        ym = x
-        if f[F_DR] != 0.0:
-            t0 = st[S_DT_T]
-            t1 = t0 + f[F_DT]
-            st[S_DRIFT] += (f[F_DR] * f[F_DT] + f[F_DA] * (math.sin(f[F_DW] * t1) - math.sin(f[F_DW] * t0))
-                            + f[F_DQ] * normals[k, 1])
-            st[S_DT_T] = t1
-            ym += st[S_DRIFT]
-        if f[F_NOISE] != 0.0:
-            ym += f[F_NOISE] * normals[k, 0]
-        if f[F_QUANT] != 0.0:
-            ym = f[F_QUANT] * math.floor(ym / f[F_QUANT] + 0.5)
-        st[S_T] += f[F_DT]
-        out_y[k] = ym
-        out_u[k] = ua
-        out_f[k] = flags
-        out_x[k] = x
-
-
 class Plant:
     """A simulated stage; see the module docstring for the API and the signal chain.
 
@@ -414,12 +352,12 @@ class Plant:
         if not isinstance(cfg, PlantConfig):
             raise ConfigError("Plant needs a PlantConfig")
         p = np.ascontiguousarray(cfg.mbw.vector)
-        stroke = cfg.stroke or _rest_stroke(cfg.mbw, p, cfg.v_min, cfg.v_max)
-        _check_bounded(cfg, p, stroke)
+        stroke = cfg.stroke or rest_stroke(cfg.mbw, p, cfg.v_min, cfg.v_max)
+        check_bounded(cfg, p, stroke)
         e = cfg.effects
         lo, hi = stroke
         span = hi - lo
-        f = np.zeros(26)
+        f = np.zeros(N_F)
         f[F_US], f[F_YS], f[F_OFF] = cfg.mbw.u_scale, cfg.mbw.y_scale, cfg.mbw.offset
         f[F_VMIN], f[F_VMAX], f[F_STEP] = cfg.v_min, cfg.v_max, cfg.slew_max * cfg.dt
         f[F_SUB], f[F_DT], f[F_DELAY] = cfg.mbw_substeps, cfg.dt, e.delay.strength
@@ -486,26 +424,3 @@ class Plant:
 
 
 _ZERO_PAIR = np.zeros((1, 2))
-
-
-def _rest_stroke(mbw: MBWParams, p: np.ndarray, v_min: float, v_max: float) -> tuple[float, float]:
-    lo = mbw.y_scale * mbw_rest_state(p, v_min / mbw.u_scale) + mbw.offset
-    hi = mbw.y_scale * mbw_rest_state(p, v_max / mbw.u_scale) + mbw.offset
-    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
-        raise ConfigError("the MBW model has no finite, increasing rest displacement over [v_min, v_max]; "
-                          "check the params file")
-    return lo, hi
-
-
-def _check_bounded(cfg: PlantConfig, p: np.ndarray, stroke: tuple[float, float]) -> None:
-    """Refuse a model that diverges on a full-range 1 Hz and 50 Hz triangle sweep (a bad params file)."""
-    from hyst_model.core import mbw_simulate
-
-    span = stroke[1] - stroke[0]
-    for f_hz in (1.0, 50.0):
-        n = max(8, int(round(1.0 / (f_hz * cfg.dt))))
-        tri = 1.0 - np.abs(np.linspace(-1.0, 1.0, n))
-        u = (cfg.v_min + (cfg.v_max - cfg.v_min) * tri) / cfg.mbw.u_scale
-        y = cfg.mbw.y_scale * mbw_simulate(p, np.ascontiguousarray(np.tile(u, 2)), 0.0, np.nan)
-        if not (np.all(np.isfinite(y)) and np.max(np.abs(y)) < 100.0 * span + abs(cfg.mbw.offset)):
-            raise ConfigError(f"the MBW model diverges on a {f_hz:g} Hz full-range sweep; check the params file")

@@ -9,20 +9,28 @@ serialized CDR bytes that arrived (raw subscriptions: any standard message type)
 The contract topics of docs/ARCHITECTURE.md (and ``/diagnostics``) have known types and are subscribed at once;
 other topics are subscribed when the ROS graph shows them (checked every 0.2 s; graph discovery can take
 seconds next to a 1 kHz publisher, so give ``TOPIC:pkg/msg/Type`` to start at once). Subscriptions are reliable
-and switch to best effort when a best-effort publisher appears. SIGINT/SIGTERM or ``--duration`` stop recording
-and finalise the bag (metadata and MCAP summary); an existing output directory is refused.
+(keep-all history) and switch to best effort when a best-effort publisher appears; callbacks only queue the bytes
+and a writer thread writes them, so a slow disk or compression never makes the subscription drop samples.
+SIGINT/SIGTERM or ``--duration`` stop recording and finalise the bag (metadata and MCAP summary); further signals
+during finalisation are reported and ignored, so the bag is always readable. An existing output directory is
+refused. To never miss the start of a lockstep run, start the recorder first and give the sim
+``-p wait_for_subscribers:=2`` (it then waits for the recorder and the controller/excitation before sample 0);
+the recorder prints ``recording`` once its contract-topic subscriptions exist.
 """
 from __future__ import annotations
 
 import argparse
+import queue
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .bagio import RawBagWriter, default_bag_path, message_class
 from .errors import BagError, SimError
@@ -63,8 +71,32 @@ class RecordNode(Node):
         self._subs: dict[str, object] = {}
         self._best_effort: set[str] = set()
         self._t0 = time.monotonic()
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._wlock = threading.Lock()  # the bag writer is not thread-safe: add_topic (executor) vs write (thread)
+        self._writer_thread = threading.Thread(target=self._drain, name="hyst_bag_writer", daemon=True)
+        self._writer_thread.start()
+        self.write_errors = 0
         self.create_timer(0.2, self._discover)
         self._discover()
+
+    def _drain(self) -> None:
+        """Writer thread: write queued messages in arrival order until the ``None`` sentinel."""
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            try:
+                with self._wlock:
+                    self.writer.write(*item)
+            except Exception as err:  # noqa: BLE001 - count and report, never kill the thread silently
+                self.write_errors += 1
+                self.get_logger().error(f"writing {item[0]} failed: {err}", throttle_duration_sec=1.0)
+
+    def flush(self) -> None:
+        """Stop taking messages and wait until every queued message is written (call before closing the bag)."""
+        if self._writer_thread.is_alive():
+            self._queue.put(None)
+            self._writer_thread.join()
 
     def _discover(self) -> None:
         if self.duration is not None and time.monotonic() - self._t0 >= self.duration:
@@ -82,7 +114,8 @@ class RecordNode(Node):
                     continue
                 msgtype = graph[topic][0]
             try:
-                self.writer.add_topic(topic, msgtype)
+                with self._wlock:
+                    self.writer.add_topic(topic, msgtype)
                 self._subscribe(topic, msgtype)
             except BagError as err:
                 self.get_logger().error(str(err))
@@ -92,8 +125,8 @@ class RecordNode(Node):
 
     def _subscribe(self, topic: str, msgtype: str) -> None:
         best = topic in self._best_effort
-        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT if best
-                         else ReliabilityPolicy.RELIABLE)
+        qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
+                         reliability=ReliabilityPolicy.BEST_EFFORT if best else ReliabilityPolicy.RELIABLE)
         self.types[topic] = msgtype
         self._subs[topic] = self.create_subscription(message_class(msgtype), topic, self._writer_for(topic), qos,
                                                      raw=True)
@@ -111,7 +144,7 @@ class RecordNode(Node):
 
     def _writer_for(self, topic: str):
         def write(data: bytes) -> None:
-            self.writer.write(topic, self.get_clock().now().nanoseconds, data)
+            self._queue.put((topic, self.get_clock().now().nanoseconds, data))
         return write
 
 
@@ -143,21 +176,43 @@ def main(args=None) -> int:
     except SimError as err:
         print(f"hyst_bag_record: {err}", file=sys.stderr)
         return 2
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     rclpy.init(args=args)
     node = None
     try:
         node = RecordNode(writer, a.topics, a.duration)
+        print(f"hyst_bag_record: recording -> {out}", flush=True)
         while rclpy.ok() and not node.done:
             rclpy.spin_once(node, timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        _ignore_signals_while_finalising()
+        if node is not None:
+            node.flush()
         writer.close()  # always finalise the bag, also on SIGINT/SIGTERM
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    print(f"hyst_bag_record: {writer.count} messages on {len(writer.topics)} topic(s) -> {out}")
-    return 0
+    lost = f", {node.write_errors} write error(s)" if node is not None and node.write_errors else ""
+    print(f"hyst_bag_record: {writer.count} messages on {len(writer.topics)} topic(s) -> {out}{lost}")
+    if threading.current_thread() is threading.main_thread():
+        # console script: a late signal must not kill the exiting interpreter (exit -2 after a good bag);
+        # called in-process: give the caller its handlers back
+        for sig, old in previous.items():
+            signal.signal(sig, signal.SIG_IGN if args is None else old)
+    return 1 if lost else 0
+
+
+def _ignore_signals_while_finalising() -> None:
+    """A second Ctrl-C must not interrupt writing the summary/metadata (that left an unreadable bag)."""
+    def note(signum, _frame):
+        print(f"hyst_bag_record: {signal.Signals(signum).name} ignored: finalising the bag, please wait",
+              file=sys.stderr, flush=True)
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, note)
 
 
 if __name__ == "__main__":

@@ -14,103 +14,87 @@ Modes
     here, a SingleThreadedExecutor timer does not hold 1 kHz on a loaded 2-core machine and EventsExecutor
     timers do not fire at all.) When it falls behind by more than a period it does not publish the missed
     samples (no burst) but advances the plant over them at the held voltage, as a real stage keeps moving, and
-    counts them (``missed_periods`` on /diagnostics); ``hyst fit --gaps bridge`` spans such gaps exactly. No command for ``command_timeout`` s
-    → the voltage ramps to ``v_safe`` at ``safe_ramp_rate`` V/s.
+    counts them (``missed_periods`` on /diagnostics); ``hyst fit --gaps bridge`` spans such gaps exactly. No
+    command for ``command_timeout`` s → the voltage ramps to ``v_safe`` at ``safe_ramp_rate`` V/s. The first
+    sample is taken once ``/stage/state`` has ``wait_for_subscribers`` subscribers (default 1), as in lockstep.
 ``lockstep`` (deterministic tests)
-    Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has a
-    subscriber and ``/stage/command`` a publisher, and re-published with the *same* stamp every 0.5 s until it
+    Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has
+    ``wait_for_subscribers`` subscribers (default 1; 2 with a recorder: ``hyst_bag_record`` started first then
+    never misses the start) and ``/stage/command`` a publisher, and re-published with the *same* stamp every 0.5 s until it
     is answered. Each command whose ``header.stamp`` equals the latest state's stamp takes exactly one sample
     and publishes state ``k+1`` stamped ``(k+1)/rate`` s; commands with any other stamp (duplicates, answers to
     a repeated state) are dropped and counted as stale. Same parameters and seed → same data, bit for bit.
+
+Health on ``/diagnostics`` (every second): ``hyst_sim: stage`` — the stage on its end stop (an input the model
+cannot follow, a diverging model) is an ERROR, never a number; clipping, timeouts, missed periods a WARN.
+``hyst_sim: timing`` — missed realtime periods with their share of the second (a WARN, an ERROR above 10 %). Parameter sets are all or nothing: :meth:`SimNode.set_parameters`
+and the node's ``set_parameters`` service (rclpy's sets each parameter alone) validate the whole resulting
+configuration and apply every parameter or none.
 """
 from __future__ import annotations
 
 import math
 import threading
 import time
-from dataclasses import dataclass
 
 import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
                                 SetParametersResult)
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_service import ParameterService
 from sensor_msgs.msg import JointState
 
 from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .errors import SimError
-from .plant import Plant, PlantConfig
+from .plant import Plant
 from .profiles import get_profile
-from .scenario import load_scenario
+from .sim_settings import SimSettings, plant_config
 from .truth_effects import EFFECT_NAMES, Effects
 
 __all__ = ["SimNode", "SimSettings", "plant_config", "main"]
 
 _DIAG_PERIOD = 1.0      # s between /diagnostics messages
 _ANNOUNCE_PERIOD = 0.5  # s between repeats of the unanswered lockstep sample 0
-
-
-@dataclass(frozen=True)
-class SimSettings:
-    """All node parameters as plain values (the frozen config the node swaps on a parameter change)."""
-
-    rate: float
-    profile: str
-    v_min: float
-    v_max: float
-    slew_max: float
-    command_timeout: float
-    v_safe: float
-    safe_ramp_rate: float
-    frame_id: str
-    mode: str
-    params_file: str
-    scenario_file: str
-    seed: int
-    effects: tuple  # ((name, strength), ...) in EFFECT_NAMES order
-
-    @property
-    def dt(self) -> float:
-        return 1.0 / self.rate
-
-    def validate(self) -> None:
-        """Raise :class:`SimError` with a reason for inconsistent values (ranges are checked by ROS)."""
-        prof = get_profile(self.profile)
-        if not (prof.v_min <= self.v_min < self.v_max <= prof.v_max):
-            raise SimError(f"need {prof.v_min} <= v_min < v_max <= {prof.v_max} V for profile {prof.name!r}, got "
-                           f"v_min={self.v_min}, v_max={self.v_max} (set them in the same call as profile)")
-        if not self.v_min <= self.v_safe <= self.v_max:
-            raise SimError(f"v_safe = {self.v_safe} V must lie in [v_min, v_max] = [{self.v_min}, {self.v_max}] V")
-        if self.mode not in ("realtime", "lockstep"):
-            raise SimError(f"mode must be 'realtime' or 'lockstep', got {self.mode!r}")
-
-
-def plant_config(s: SimSettings) -> PlantConfig:
-    """The plant a settings object describes: profile or params file, limits, effects, then the scenario."""
-    common = dict(sensor=False, seed=s.seed, v_min=s.v_min, v_max=s.v_max, slew_max=s.slew_max, v_init=s.v_safe)
-    if s.params_file:
-        cfg = PlantConfig.from_params_file(s.params_file, s.profile, s.rate, **common)
-    else:
-        cfg = PlantConfig.for_profile(s.profile, s.rate, **common)
-    cfg = cfg.with_strengths(**dict(s.effects))
-    if s.scenario_file:
-        cfg = load_scenario(s.scenario_file).apply(cfg)
-    return cfg
+_MISSED_ERROR = 0.10    # share of missed realtime periods in a second that is an ERROR, not a WARN
 
 
 def _fp(lo: float, hi: float) -> list:
     return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
+class _AllOrNothingParameterService(ParameterService):
+    """The node's parameter services, with ``set_parameters`` going through :meth:`SimNode.set_parameters`.
+
+    rclpy's service sets each parameter of a request on its own, so a remote ``[v_min=100, v_max=50]`` still
+    applied v_min; here the request is validated as one resulting configuration (one result per parameter).
+    """
+
+    def _set_parameters_callback(self, request, response):
+        params = [Parameter.from_parameter_msg(p) for p in request.parameters]
+        try:
+            response.results = self._get_node().set_parameters(params)
+        except ParameterNotDeclaredException:  # its message names none (rclpy consumes the generator first)
+            node = self._get_node()
+            names = ", ".join(p.name for p in params if not node.has_parameter(p.name))
+            response.results = [SetParametersResult(successful=False, reason=f"undeclared parameter(s): {names}; "
+                                                    "none of this request applied")] * len(params)
+        return response
+
+
 class SimNode(Node):
     """The simulated stage node; see the module docstring."""
 
     def __init__(self, **kwargs) -> None:
-        super().__init__("hyst_sim", **kwargs)
+        services = kwargs.pop("start_parameter_services", True)
+        super().__init__("hyst_sim", start_parameter_services=False, **kwargs)
+        if services:
+            self._parameter_service = _AllOrNothingParameterService(self)
         self._declare_parameters()
         self._settings = self._read_settings()
         try:
@@ -122,7 +106,9 @@ class SimNode(Node):
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
 
-        self._pub = self.create_publisher(JointState, "/stage/state", 10)
+        # deep history: a reliable subscriber that is slow for a moment (a recorder) must not lose samples
+        self._pub = self.create_publisher(JointState, "/stage/state", 1000)
+        self._wait_n = int(self.get_parameter("wait_for_subscribers").value)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(JointState, "/stage/command", self._on_command, 10)
         self._cmd = None                 # (last commanded voltage V, monotonic arrival time), one object: atomic
@@ -179,6 +165,10 @@ class SimNode(Node):
         d("mode", "realtime", ParameterDescriptor(
             description="realtime | lockstep (one sample per answered state; deterministic)", read_only=True,
             additional_constraints="one of: realtime, lockstep; fixed at start"))
+        d("wait_for_subscribers", 1, ParameterDescriptor(
+            description="publish the first sample only once /stage/state has this many subscribers (controller "
+                        "+ recorder = 2), so no subscriber misses the start (both modes)", read_only=True,
+            integer_range=[IntegerRange(from_value=1, to_value=100, step=1)]))
         d("params_file", "", ParameterDescriptor(description="MBW params file ('' = embedded default stage)"))
         d("scenario_file", "", ParameterDescriptor(
             description="hidden-effects scenario file ('' = none); its contents are never reported"))
@@ -212,6 +202,16 @@ class SimNode(Node):
             v_safe=float(get("v_safe")), safe_ramp_rate=float(get("safe_ramp_rate")), frame_id=str(get("frame_id")),
             mode=str(get("mode")), params_file=str(get("params_file")), scenario_file=str(get("scenario_file")),
             seed=int(get("seed")), effects=tuple((n, get(f"effects.{n}")) for n in EFFECT_NAMES))
+
+    def set_parameters(self, parameter_list):
+        """All or nothing (issue 13): the whole list is validated as one resulting configuration.
+
+        rclpy's ``Node.set_parameters`` validates and applies each parameter on its own, so
+        ``[v_min=100, v_max=50]`` rejected v_min and applied v_max; here both are rejected (one result per
+        parameter, all equal).
+        """
+        result = self.set_parameters_atomically(parameter_list)
+        return [result] * len(parameter_list)
 
     def _on_set(self, params) -> SetParametersResult:
         changes = {p.name: p.value for p in params}
@@ -292,6 +292,11 @@ class SimNode(Node):
 
     def _sample_loop(self) -> None:
         """Realtime mode: one sample per period on a fixed schedule; skip (and count) periods when behind."""
+        # the first sample waits for wait_for_subscribers matched subscribers (a recorder then has the run's
+        # start); the stage rests at v_safe meanwhile, so nothing happens that a subscriber could miss
+        while self._pub.get_subscription_count() < self._wait_n:
+            if self._stop.wait(0.01):
+                return
         due = time.monotonic()
         while not self._stop.is_set():
             dt = self._settings.dt
@@ -304,6 +309,8 @@ class SimNode(Node):
                 missed = int(-wait / dt)
                 self._count("late_ticks", missed)
                 due += missed * dt
+                self.get_logger().warning(f"sampler behind: {missed} period(s) missed (plant advanced at the held "
+                                          "voltage, not published)", throttle_duration_sec=5.0)
                 self._hold(missed)
             try:
                 self._tick()
@@ -360,7 +367,7 @@ class SimNode(Node):
             self.destroy_timer(self._timer)
             self._timer = None
             return
-        if self._pub.get_subscription_count() == 0 or self.count_publishers("/stage/command") == 0:
+        if self._pub.get_subscription_count() < self._wait_n or self.count_publishers("/stage/command") == 0:
             return
         now = time.monotonic()
         if now < self._announce_at:
@@ -408,8 +415,21 @@ class SimNode(Node):
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st]
+        arr.status = [st, self._timing_status(d)]
         self._diag_pub.publish(arr)
+
+    def _timing_status(self, d: dict) -> DiagnosticStatus:
+        """The sampler's timing on its own status, so a late sampler does not mask the stage's level."""
+        share = d["late_ticks"] / max(1, d["late_ticks"] + d["samples"])
+        st = DiagnosticStatus(name="hyst_sim: timing", hardware_id=f"sim:{self._settings.profile}")
+        st.level = DiagnosticStatus.ERROR if share > _MISSED_ERROR else (
+            DiagnosticStatus.WARN if d["late_ticks"] else DiagnosticStatus.OK)
+        st.message = (f"{d['late_ticks']} missed periods ({100 * share:.0f} % of the last {_DIAG_PERIOD:g} s)"
+                      if d["late_ticks"] else "no missed periods")
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in (
+            ("missed_periods", self._counts["late_ticks"]), ("missed_share", f"{share:.3f}"),
+            ("achieved_rate_hz", f"{d['samples'] / _DIAG_PERIOD:g}"))]
+        return st
 
     @property
     def counts(self) -> dict:
@@ -423,7 +443,8 @@ def usage() -> str:
              "parameters (shared with the driver unless marked sim):",
              "  rate [Hz] 1000 (1..5000)   profile pea|gma   v_min, v_max, v_safe [V] (profile defaults)",
              "  slew_max [V/s]   command_timeout [s] 0.2   safe_ramp_rate [V/s] 100 (sim)   frame_id 'stage'",
-             "  mode realtime|lockstep (sim)   params_file (sim)   scenario_file (sim, hidden)   seed (sim)",
+             "  mode realtime|lockstep (sim)   wait_for_subscribers (sim, lockstep) 1   params_file (sim)",
+             "  scenario_file (sim, hidden)   seed (sim)",
              "effects (sim; 0 = off):"]
     for name in EFFECT_NAMES:
         spec = Effects.spec(name)

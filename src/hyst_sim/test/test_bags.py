@@ -184,3 +184,46 @@ def test_recorder_process_finalises_the_bag_on_signal(tmp_path, sig):
     assert (out / "metadata.yaml").is_file()
     existing = subprocess.run([str(exe), "/stage/state", "-o", str(out)], capture_output=True, timeout=30)
     assert existing.returncode == 2 and b"exists" in existing.stderr and b"Traceback" not in existing.stderr
+
+
+@pytest.mark.slow
+def test_recorder_keeps_every_sample_and_survives_repeated_signals(tmp_path):
+    """Issue 11: samples lost mid-run, and a second Ctrl-C during finalisation left an unreadable bag."""
+    exe = Path(sys.executable).with_name("hyst_bag_record")
+    out = tmp_path / "rec"
+    proc = subprocess.Popen([str(exe), "/stage/state", "-o", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=dict(os.environ))
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("pub", context=ctx)
+    pub = node.create_publisher(JointState, "/stage/state", 1000)  # as deep as the sim's
+    n = 4000
+    try:
+        end = time.monotonic() + 30.0
+        while pub.get_subscription_count() == 0 and time.monotonic() < end:
+            time.sleep(0.01)
+        assert pub.get_subscription_count() == 1
+        t0 = time.monotonic()
+        for k in range(n):  # ~2 kHz, paced, compressed output
+            m = JointState()
+            m.header.stamp.sec, m.header.stamp.nanosec = divmod(k * 500_000, 1_000_000_000)
+            m.name, m.position, m.effort = ["stage"], [k * 1e-9], [0.0]
+            pub.publish(m)
+            wait = t0 + (k + 1) * 5e-4 - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+        time.sleep(1.0)
+        for _ in range(20):  # Ctrl-C, then impatient Ctrl-Cs while it finalises
+            if proc.poll() is not None:
+                break
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.02)
+        out_text, err_text = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert proc.returncode == 0, err_text.decode()
+    got = list(read_raw(out))
+    assert len(got) == n

@@ -225,6 +225,92 @@ def test_console_script_exits_cleanly_on_sigterm_and_refuses_bad_parameters():
 
 
 
+def _set_via_service(rig, params):
+    """``params`` through the node's real ``set_parameters`` service (what ``ros2 param set`` and rqt call)."""
+    from rcl_interfaces.srv import SetParameters
+    cli = rig.tester.create_client(SetParameters, "/hyst_sim/set_parameters")
+    assert rig.spin_until(cli.service_is_ready, 30.0), "set_parameters service not up"
+    fut = cli.call_async(SetParameters.Request(parameters=[p.to_parameter_msg() for p in params]))
+    assert rig.spin_until(fut.done, 30.0), "no set_parameters response"
+    rig.tester.destroy_client(cli)
+    return fut.result().results
+
+
+@pytest.mark.parametrize("via", ["service", "local"])
+def test_parameter_sets_are_all_or_nothing(rig_factory, via):
+    """Issue 13: set_parameters([v_min=100, v_max=50]) applied v_max; a rejected profile change left v_max = 5 V."""
+    rig = rig_factory(rate=200.0)
+    node = rig.node
+    apply = (lambda ps: _set_via_service(rig, ps)) if via == "service" else node.set_parameters
+
+    def limits():
+        return (node.get_parameter("profile").value, node.get_parameter("v_min").value,
+                node.get_parameter("v_max").value, node._settings.v_min, node._settings.v_max,
+                node._plant.config.v_min, node._plant.config.v_max)
+
+    before = limits()
+    assert before == ("pea", 0.0, 150.0, 0.0, 150.0, 0.0, 150.0)
+    # inconsistent together (rclpy's own service refused v_min alone and applied v_max = 50 V)
+    res = apply([Parameter("v_min", value=100.0), Parameter("v_max", value=50.0)])
+    assert len(res) == 2 and not any(r.successful for r in res) and all("v_min" in r.reason for r in res)
+    assert limits() == before
+    # the profile alone is refused while 0-150 V stays; with a v_max that does not fit gma either, nothing moves
+    res = apply([Parameter("profile", value="gma"), Parameter("v_max", value=7.0)])
+    assert len(res) == 2 and not any(r.successful for r in res) and res[0].reason
+    assert limits() == before
+    one_undeclared = [Parameter("v_min", value=100.0), Parameter("nope", value=1.0)]   # none applied
+    if via == "service":
+        res = apply(one_undeclared)
+        assert len(res) == 2 and not any(r.successful for r in res) and "nope" in res[0].reason
+    else:  # rclpy's local API raises for an undeclared name
+        from rclpy.exceptions import ParameterNotDeclaredException
+        with pytest.raises(ParameterNotDeclaredException):
+            apply(one_undeclared)
+    assert limits() == before
+    res = apply([Parameter("v_min", value=10.0), Parameter("v_max", value=120.0), Parameter("v_safe", value=10.0)])
+    assert len(res) == 3 and all(r.successful for r in res)
+    assert limits() == ("pea", 10.0, 120.0, 10.0, 120.0, 10.0, 120.0)
+    res = apply([Parameter("profile", value="gma"), Parameter("v_min", value=-5.0), Parameter("v_max", value=5.0),
+                 Parameter("v_safe", value=0.0)])
+    assert all(r.successful for r in res) and limits() == ("gma", -5.0, 5.0, -5.0, 5.0, -5.0, 5.0)
+
+
+def _status(rig, cond, timeout=15.0, name="hyst_sim: stage"):
+    found = []
+
+    def check():
+        for a in rig.diags:
+            for st in a.status:
+                if st.name == name and cond(st):
+                    found.append(st)
+        rig.diags.clear()
+        return bool(found)
+    assert rig.spin_until(check, timeout), "no matching /diagnostics status"
+    return found[0]
+
+
+def _values(st):
+    return {kv.key: kv.value for kv in st.values}
+
+
+def test_missed_realtime_periods_are_reported_with_their_share(rig_factory):
+    rig = rig_factory(rate=1000.0)
+    assert rig.spin_until(lambda: len(rig.states) > 5)
+    with rig.node._lock:  # stall the sampler for 0.3 s (the test of a late thread, not a wait): ~300 periods
+        before = rig.node.counts["late_ticks"]
+        time.sleep(0.3)
+    # all ~300 are counted at once when the sampler wakes, so they land in one diagnostics period
+    st = _status(rig, lambda s: int(_values(s)["missed_periods"]) >= before + 250, name="hyst_sim: timing")
+    vals = _values(st)
+    share = float(vals["missed_share"])
+    assert 0.1 < share < 1.0 and st.level == st.ERROR
+    pct = float(st.message.split("missed periods (")[1].split(" %")[0])
+    assert abs(pct - 100 * share) <= 0.51, (pct, share)           # the same share in the message, rounded
+    # the missed samples are not published in a burst: the stream has a gap, the stamps stay increasing
+    stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in rig.states])
+    assert np.all(np.diff(stamps) > 0) and np.diff(stamps).max() > 0.2
+
+
 def test_end_stop_is_a_fault_on_diagnostics_not_a_number(rig_factory):
     rig = rig_factory(mode="lockstep", slew_max=1e7, rate=2000.0)
     assert rig.spin_until(lambda: len(rig.states) >= 1), "no initial state in lockstep"
@@ -237,3 +323,23 @@ def test_end_stop_is_a_fault_on_diagnostics_not_a_number(rig_factory):
     assert rig.node.counts["end_stop"] > 0
     assert rig.spin_until(lambda: any(s.level == b"\x02" and "end stop" in s.message
                                       for d in rig.diags for s in d.status), 5.0)
+
+
+def test_end_stop_fault_names_its_samples_and_clears_when_the_stage_is_free(rig_factory):
+    rig = rig_factory(mode="lockstep", slew_max=1e7, rate=2000.0)
+    assert rig.spin_until(lambda: len(rig.states) >= 1), "no initial state in lockstep"
+    for k in range(40):
+        last = rig.states[-1]
+        rig.send(150.0 * (k % 2 == 0), last.header.stamp)
+        assert rig.spin_until(lambda: rig.states[-1].header.stamp != last.header.stamp), f"no state for {k}"
+    n_stop = rig.node.counts["end_stop"]
+    assert n_stop > 0
+    st = _status(rig, lambda s: s.level == s.ERROR)
+    assert "FAULT" in st.message and 0 < int(_values(st)["end_stop_samples"]) <= n_stop  # a second may split the run
+    for k in range(40):  # a calm input: the stage leaves the stop
+        last = rig.states[-1]
+        rig.send(75.0, last.header.stamp)
+        assert rig.spin_until(lambda: rig.states[-1].header.stamp != last.header.stamp), f"no state for {k}"
+    # a later second without stop contact is no longer a fault; the total stays on record
+    ok = _status(rig, lambda s: s.level != s.ERROR, timeout=30.0)
+    assert "end stop" not in ok.message and int(_values(ok)["end_stop_samples"]) >= n_stop

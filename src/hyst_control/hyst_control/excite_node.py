@@ -1,0 +1,193 @@
+"""hyst_excite_node: play an open-loop voltage excitation for identification (issue 11, Build 3).
+
+Answers every ``/stage/state`` sample with one ``/stage/command`` (``effort[0]`` V, ``header.stamp`` = the stamp of
+the state it answers, as the controller does; docs/ARCHITECTURE.md), so it drives the lockstep sim, the realtime
+sim and the driver alike. The command answering the state stamped ``t`` is excitation sample
+``round((t - t_first)·rate) + 1`` (time-indexed: a missed period skips its sample instead of shifting the rest, and
+the jump over a gap is faded in over ``step_rise``; a repeated stamp — lockstep re-announcing sample 0 — is
+answered with the same value). After the last sample the
+node answers once more with the rest voltage and stops (exit 0). Parameters (all fixed at start): ``profile``,
+``rate``, ``v_min``, ``v_max``, ``slew_max``, ``parts``, ``amplitudes``, ``frequency``, ``periods``, ``n_steps``,
+``hold``, ``step_rise``, ``f_lo``, ``f_hi``, ``seconds``, ``seed`` (see :mod:`hyst_control.excitation`) and
+``wait_for_subscribers`` (no answer until ``/stage/command`` has that many subscribers: 2 with a recorder).
+"""
+from __future__ import annotations
+
+import math
+import sys
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from .errors import ControlError
+from .excitation import PARTS, ExcitationSpec, build_excitation
+from .limits import GMA_LIMITS, PEA_LIMITS
+
+__all__ = ["ExciteNode", "main"]
+
+
+def _fp(lo: float, hi: float) -> list:
+    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+
+
+def _ip(lo: int, hi: int) -> list:
+    return [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+
+
+class ExciteNode(Node):
+    """Open-loop excitation player; see the module docstring. ``done`` is True after the last sample."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("hyst_excite", **kwargs)
+        self._declare()
+        self.spec = self._read()
+        self.excitation = build_excitation(self.spec)
+        self.done = False
+        self._t_first = None
+        self._k_last = None             # index of the last sample answered
+        self._v_last = None             # the command sent for it (V)
+        self._resume = (0.0, 0.0)       # (stamp s, offset V) of the last gap: the offset fades over step_rise
+        self.answered = 0
+        self.add_on_set_parameters_callback(
+            lambda _p: SetParametersResult(successful=False, reason="excitation parameters apply at start only"))
+        self._pub = self.create_publisher(JointState, "/stage/command", 1000)
+        self.create_subscription(JointState, "/stage/state", self._on_state, 1000)
+        ex = self.excitation
+        self.get_logger().info(
+            f"excitation ready: {', '.join(self.spec.parts)}, {ex.duration:.2f} s at {1 / self.spec.dt:g} Hz, "
+            f"{ex.u.min():.3g}..{ex.u.max():.3g} V")
+
+    def _declare(self) -> None:
+        d = self.declare_parameter
+        ro = dict(read_only=True)
+        d("profile", "pea", ParameterDescriptor(description="limit defaults: pea (0-150 V) | gma (+-5 V)", **ro))
+        prof = self.get_parameter("profile").value
+        if prof not in ("pea", "gma"):
+            raise ControlError(f"profile must be pea or gma, got {prof!r}")
+        lim = GMA_LIMITS if prof == "gma" else PEA_LIMITS
+        s = ExcitationSpec()
+        d("rate", 1000.0, ParameterDescriptor(description="stage sample rate (Hz)", floating_point_range=_fp(1, 5000),
+                                              **ro))
+        d("v_min", lim.v_min, ParameterDescriptor(description="lowest command (V), inside the profile",
+                                                  floating_point_range=_fp(lim.v_min, lim.v_max), **ro))
+        d("v_max", lim.v_max, ParameterDescriptor(description="highest command (V), inside the profile",
+                                                  floating_point_range=_fp(lim.v_min, lim.v_max), **ro))
+        d("slew_max", float(min(lim.slew_max, 1e9)), ParameterDescriptor(
+            description="command slew limit (V/s)", floating_point_range=_fp(1e-3, 1e9), **ro))
+        d("parts", ",".join(s.parts), ParameterDescriptor(description=f"comma list of {', '.join(PARTS)}", **ro))
+        d("amplitudes", list(s.amplitudes), ParameterDescriptor(
+            description="fractions of the range for sines/triangles (largest: multisine, sweep)", **ro))
+        for name, lo, hi, txt in (("frequency", 1e-3, 2500.0, "sine/triangle frequency (Hz)"),
+                                  ("hold", 0.0, 60.0, "step hold and pause between parts (s)"),
+                                  ("step_rise", 0.0, 10.0, "raised-cosine rise time of each step (s)"),
+                                  ("f_lo", 1e-3, 2500.0, "multisine/sweep lowest frequency (Hz)"),
+                                  ("f_hi", 1e-3, 2500.0, "multisine/sweep highest frequency (Hz)"),
+                                  ("seconds", 1e-3, 3600.0, "multisine and sweep length (s)")):
+            d(name, float(getattr(s, name)), ParameterDescriptor(description=txt, floating_point_range=_fp(lo, hi),
+                                                                 **ro))
+        d("periods", s.periods, ParameterDescriptor(description="periods per sine/triangle amplitude",
+                                                    integer_range=_ip(1, 10_000), **ro))
+        d("n_steps", s.n_steps, ParameterDescriptor(description="random step levels", integer_range=_ip(1, 10_000),
+                                                    **ro))
+        d("wait_for_subscribers", 1, ParameterDescriptor(
+            description="answer no state until /stage/command has this many subscribers (stage + recorder = 2), "
+                        "so a recorder never misses the first commands", integer_range=_ip(1, 100), **ro))
+        d("seed", 0, ParameterDescriptor(description="seed of step levels and multisine phases",
+                                         integer_range=_ip(0, 2**31 - 1), **ro))
+
+    def _read(self) -> ExcitationSpec:
+        def g(name):
+            return self.get_parameter(name).value
+
+        parts = tuple(p.strip() for p in str(g("parts")).split(",") if p.strip())
+        return ExcitationSpec(
+            v_min=float(g("v_min")), v_max=float(g("v_max")), slew_max=float(g("slew_max")), dt=1.0 / float(g("rate")),
+            parts=parts, amplitudes=tuple(float(a) for a in g("amplitudes")), frequency=float(g("frequency")),
+            periods=int(g("periods")), n_steps=int(g("n_steps")), hold=float(g("hold")),
+            step_rise=float(g("step_rise")), f_lo=float(g("f_lo")),
+            f_hi=float(g("f_hi")), seconds=float(g("seconds")), seed=int(g("seed")))
+
+    def _on_state(self, msg: JointState) -> None:
+        if self.done:
+            return
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if self._t_first is None:
+            if self._pub.get_subscription_count() < self.get_parameter("wait_for_subscribers").value:
+                return  # the lockstep sim re-announces sample 0; a realtime stage just starts later
+            self._t_first = t
+        k = int(round((t - self._t_first) / self.spec.dt)) + 1
+        u = self.excitation.u
+        if k >= len(u):
+            v, self.done = self.spec.rest, True
+            self.get_logger().info(f"excitation finished after {self.answered} samples")
+        else:
+            v = self._blended(t, k)
+        out = JointState()
+        out.header.stamp = msg.header.stamp
+        out.name = ["stage"]
+        out.effort = [v if math.isfinite(v) else self.spec.rest]
+        self._pub.publish(out)
+        self._k_last, self._v_last = k, out.effort[0]
+        self.answered += 1
+
+    def flush(self, timeout: float) -> bool:
+        """Wait until every subscriber has acknowledged every command (reliable QoS), at most ``timeout`` s.
+
+        Leaving at once lost up to 600 commands in a bag: a loaded recorder had not received them when the
+        publisher was destroyed, though the stage had.
+        """
+        from rclpy.duration import Duration
+        return self._pub.wait_for_all_acked(Duration(seconds=timeout))
+
+    def _blended(self, t: float, k: int) -> float:
+        """Excitation sample ``k``, resumed smoothly after missed periods.
+
+        Over a gap the stage held the last voltage while the excitation moved on; jumping to sample ``k`` (up to
+        the full range in one period) drove the simulated MBW stage onto its end stop. The difference fades out
+        by a raised cosine over ``step_rise``, as the steps rise; the timing of the rest is unchanged.
+        """
+        u = self.excitation.u
+        uk = float(u[max(k, 0)])
+        if self._k_last is not None and k > self._k_last + 1 and math.isfinite(uk) and self.spec.step_rise > 0:
+            self._resume = (t, self._v_last - uk)
+        t0, off = self._resume
+        x = (t - t0) / self.spec.step_rise if self.spec.step_rise > 0 else 1.0
+        return uk + off * 0.5 * (1.0 + math.cos(math.pi * x)) if 0.0 <= x < 1.0 else uk
+
+
+def main(args=None) -> int:
+    """Console script ``hyst_excite_node`` (``--ros-args -p rate:=2000.0 -p parts:=steps,sweep``)."""
+    import argparse
+
+    from rclpy.exceptions import ParameterException
+    from rclpy.utilities import remove_ros_args
+
+    ap = argparse.ArgumentParser(prog="hyst_excite_node", description=__doc__.split("\n\n")[0],
+                                 epilog="parameters: --ros-args -p NAME:=VALUE (see the module docs)")
+    ap.parse_args(remove_ros_args(args=sys.argv if args is None else args)[1:])
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = ExciteNode()
+        while rclpy.ok() and not node.done:
+            rclpy.spin_once(node, timeout_sec=0.1)
+        if node.done:  # every command must reach every subscriber (a lagging recorder) before the publisher goes
+            if not node.flush(30.0):
+                node.get_logger().warning("not every subscriber acknowledged the last commands within 30 s")
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ControlError, ParameterException, ValueError) as err:
+        print(f"hyst_excite_node: {err}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,59 @@
+"""The sim node's settings as a frozen, validated dataclass and the plant they describe (no rclpy here)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .errors import SimError
+from .plant import PlantConfig
+from .profiles import get_profile
+from .scenario import load_scenario
+
+__all__ = ["SimSettings", "plant_config"]
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """All node parameters as plain values (the frozen config the node swaps on a parameter change)."""
+
+    rate: float
+    profile: str
+    v_min: float
+    v_max: float
+    slew_max: float
+    command_timeout: float
+    v_safe: float
+    safe_ramp_rate: float
+    frame_id: str
+    mode: str
+    params_file: str
+    scenario_file: str
+    seed: int
+    effects: tuple  # ((name, strength), ...) in EFFECT_NAMES order
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate
+
+    def validate(self) -> None:
+        """Raise :class:`SimError` with a reason for inconsistent values (ranges are checked by ROS)."""
+        prof = get_profile(self.profile)
+        if not (prof.v_min <= self.v_min < self.v_max <= prof.v_max):
+            raise SimError(f"need {prof.v_min} <= v_min < v_max <= {prof.v_max} V for profile {prof.name!r}, got "
+                           f"v_min={self.v_min}, v_max={self.v_max} (set them in the same call as profile)")
+        if not self.v_min <= self.v_safe <= self.v_max:
+            raise SimError(f"v_safe = {self.v_safe} V must lie in [v_min, v_max] = [{self.v_min}, {self.v_max}] V")
+        if self.mode not in ("realtime", "lockstep"):
+            raise SimError(f"mode must be 'realtime' or 'lockstep', got {self.mode!r}")
+
+
+def plant_config(s: SimSettings) -> PlantConfig:
+    """The plant a settings object describes: profile or params file, limits, effects, then the scenario."""
+    common = dict(sensor=False, seed=s.seed, v_min=s.v_min, v_max=s.v_max, slew_max=s.slew_max, v_init=s.v_safe)
+    if s.params_file:
+        cfg = PlantConfig.from_params_file(s.params_file, s.profile, s.rate, **common)
+    else:
+        cfg = PlantConfig.for_profile(s.profile, s.rate, **common)
+    cfg = cfg.with_strengths(**dict(s.effects))
+    if s.scenario_file:
+        cfg = load_scenario(s.scenario_file).apply(cfg)
+    return cfg
