@@ -136,6 +136,7 @@ class ControllerNode(Node):
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         self._cmd_pub = self.create_publisher(JointState, "/stage/command", 10)
+        self._warned_commanders = False
         self._state_pub = self.create_publisher(JointState, "/controller/state", 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(JointState, "/stage/state", self._on_state, 10)
@@ -363,7 +364,12 @@ class ControllerNode(Node):
         if self._unused:  # whatever else is going on, the dropped model terms stay visible
             st.level = max(st.level, DiagnosticStatus.WARN)
             st.message += f"; {self._unused}"
-        vals = dict(self._n, algorithm=self._settings.algorithm)
+        others = self._other_commanders()
+        if others:  # two sources of /stage/command: the stage follows whichever wrote last
+            st.level = max(st.level, DiagnosticStatus.WARN)
+            st.message += (f"; {others} other publisher(s) on {self._cmd_pub.topic_name}: another controller or "
+                           "excitation is commanding this stage too")
+        vals = dict(self._n, algorithm=self._settings.algorithm, other_command_publishers=others)
         if self._unused:
             vals["unused_model_terms"] = self._unused
         if self._ctrl is not None:
@@ -376,6 +382,15 @@ class ControllerNode(Node):
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [st]
         self._diag_pub.publish(arr)
+
+    def _other_commanders(self) -> int:
+        """Publishers on the command topic besides this node (from the ROS graph); logged once when they appear."""
+        n = max(self.count_publishers(self._cmd_pub.topic_name) - 1, 0)
+        if n and not self._warned_commanders:
+            self.get_logger().warning(f"{n} other publisher(s) on {self._cmd_pub.topic_name}: another controller "
+                                      "or excitation node is commanding this stage too")
+        self._warned_commanders = bool(n)
+        return n
 
     def _unused_model_terms(self) -> str:
         """What the params file (or a push) says about the stage that the control laws do not use, in words.

@@ -142,3 +142,23 @@ def test_effects_of_a_params_file_are_reported_never_silently_dropped(harness, t
     plain.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      zeta1: 0.45\n")
     node2, *_ = harness("--params-file", str(plain))
     assert node2._unused == ""  # noqa: SLF001
+
+
+def test_a_second_command_publisher_is_reported(harness):
+    """Two sources of /stage/command (a second controller, an excitation node): WARN on /diagnostics."""
+    node, peer, ex, pub, got = harness()
+    assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
+    pub.publish(_state(0, 10e-6, 50.0))
+
+    def warned() -> bool:
+        return any(s.level >= DiagnosticStatus.WARN and "other publisher" in s.message
+                   for d in got["diag"] for s in d.status)
+
+    # alone on the topic: diagnostics arrive, none of them names another publisher
+    assert _spin_until(ex, lambda: len(got["diag"]) >= 2, 10.0)
+    assert not warned()
+    rival = peer.create_publisher(JointState, "/stage/command", 10)
+    assert _spin_until(ex, warned, 15.0)
+    vals = {kv.key: kv.value for s in got["diag"][-1].status for kv in s.values}
+    assert vals["other_command_publishers"] == "1"
+    peer.destroy_publisher(rival)
