@@ -211,11 +211,16 @@ def read_params(path: str | Path) -> ParamsSpec:
     effects = model.pop("effects", []) or []
     if isinstance(effects, str):
         effects = [e.strip() for e in effects.split(",") if e.strip()]
+    if not isinstance(effects, list) or not all(isinstance(e, str) for e in effects):
+        raise ParamsError(f"{path}: model.effects must be a list of effect names, not {effects!r}")
+    fit = section.get("fit") or {}
+    if not isinstance(fit, Mapping):
+        raise ParamsError(f"{path}: 'fit' must be a mapping of provenance keys, not {type(fit).__name__}")
     flat = flatten(model)
     for k, v in flat.items():
         if isinstance(v, bool) or not isinstance(v, (int, float, str)):
             raise ParamsError(f"{path}: model.{k} has an unsupported value {v!r}")
-    spec = ParamsSpec(base, list(effects), {}, {}, dict(section.get("fit") or {}))
+    spec = ParamsSpec(base, list(effects), {}, {}, dict(fit))
     numeric = {k: v for k, v in flat.items() if isinstance(v, (int, float))}
     spec.config = {k: v for k, v in flat.items()}
     try:
