@@ -33,6 +33,7 @@ from hyst_model.core import PARAM_NAMES, MBWParams, pea_default
 from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .base import check_model, hand_over
+from .compensation import Compensation, effect_parameters, plan_compensation
 from .dmrac import TABLE53, DMRACGains
 from .dppc import DPPCGains
 from .errors import ControlError
@@ -91,6 +92,14 @@ class ControllerSettings:
     pid: PIDGains
     model: MBWParams
     reference: Reference | None = None
+    #: The params file's effects (innermost first) and their parameters/configuration, dotted (``creep.gain``).
+    effects: tuple = ()
+    effect_values: tuple = ()
+
+    def compensation(self) -> Compensation:
+        """A fresh compensation (its effects keep per-run state) for the model's effects."""
+        vals = dict(self.effect_values)
+        return plan_compensation(self.model, self.effects, vals, vals, 1.0 / self.rate)
 
     def gains(self, algorithm: str):
         return getattr(self, algorithm) if algorithm in _GAINS else None
@@ -116,9 +125,12 @@ class ControllerNode(Node):
         super().__init__("hyst_controller", **kwargs)
         self._declare()
         self._settings = self._read()  # start-up values were validated by _read
+        self._compensating: list[str] = []
         self._unused = self._unused_model_terms()
         if self._unused:
             self.get_logger().warning(self._unused)
+        if self._compensating:
+            self.get_logger().info("compensating the model's " + ", ".join(self._compensating))
         self.scheduling = set_realtime(int(self.get_parameter("rt_priority").value))
         if self.get_parameter("rt_priority").value and self.scheduling.policy != "fifo":
             self.get_logger().warning(f"{self.scheduling.note}; running with normal scheduling")
@@ -181,8 +193,9 @@ class ControllerNode(Node):
         m = _profile_model(self.get_parameter("profile").value)
         d("model.base", "mbw", ParameterDescriptor(description="base model of the params file (controllers need mbw)"))
         d("model.effects", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
-            description="effects of the params file; the controllers do not compensate them yet: reported at "
-                        "start, on every change and on /diagnostics, never silently dropped"))
+            description="effects of the params file (innermost first): those with an inverse are compensated "
+                        "(creep, asymmetry, saturation, delay); the others are reported at start, on every "
+                        "change and on /diagnostics, never silently dropped"))
         d("model.dt", 0.0, ParameterDescriptor(
             description="sample period the model was identified at (s); 0 = unknown; must equal 1/rate",
             floating_point_range=_fp(0.0, 1.0)))
@@ -190,6 +203,15 @@ class ControllerNode(Node):
             d(f"model.{key}", _F(getattr(m, key)), ParameterDescriptor(
                 description=f"stage model {key} (params file; thesis ν convention)",
                 floating_point_range=_fp(-1e6, 1e6)))
+        d("model.offset_bound", 1e-3, ParameterDescriptor(
+            description="bound of the fitted offset (m; params file provenance, not used by the laws)",
+            floating_point_range=_fp(0.0, 1e6)))
+        # Every built-in effect's parameters at their identity values: a params file or a push may carry any.
+        self._effect_keys = effect_parameters(1.0 / self.get_parameter("rate").value, m.u_scale, m.y_scale)
+        for key, (default, txt) in self._effect_keys.items():
+            desc = ParameterDescriptor(description=txt, floating_point_range=_fp(-1e6, 1e6)) \
+                if isinstance(default, float) else ParameterDescriptor(description=txt)
+            d(f"model.{key}", default, desc)
 
     def _read(self, changes: dict | None = None) -> ControllerSettings:
         """Settings from current parameters (+ pending ``changes``); raises ControlError/ValueError with a reason."""
@@ -210,13 +232,21 @@ class ControllerNode(Node):
             raise ControlError("dmrac.initial must be model, cs0, cs1, cs2 or cs3")
         gains = {a: cls(**{n: get(f"{a}.{n}") for n in spec}) for a, (cls, spec) in _GAINS.items()}
         model = check_model(MBWParams(**{k: _F(get(f"model.{k}")) for k in _MODEL_KEYS}))  # whatever runs now
+        try:
+            effects = tuple(str(e) for e in (get("model.effects") or ()))
+        except ParameterUninitializedException:
+            effects = ()
+        named = {e.split(".")[0] for e in self._effect_keys}
+        evals = tuple((k, get(f"model.{k}")) for k in self._effect_keys if k.split(".")[0] in effects and
+                      k.split(".")[0] in named)
         s = ControllerSettings(
             algorithm=alg, rate=_F(get("rate")),
             limits=CommandLimits(_F(get("v_min")), _F(get("v_max")), _F(get("slew_max")), _F(get("v_safe"))),
             watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
             dmrac_initial=init, model=model,
-            reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, **gains)
-        make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init)  # checks the model too
+            reference=parse_reference(str(get("reference"))) if str(get("reference")) else None,
+            effects=effects, effect_values=evals, **gains)
+        make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init, s.compensation())  # checks all
         return s
 
     def _on_set(self, params) -> SetParametersResult:
@@ -229,7 +259,7 @@ class ControllerNode(Node):
     def _after_set(self, params) -> None:
         old, new = self._settings, self._read()
         self._settings = new
-        if any(p.name == "model.effects" for p in params):
+        if new.effects != old.effects or new.effect_values != old.effect_values:
             unused = self._unused_model_terms()
             if unused and unused != self._unused:
                 self.get_logger().warning(unused)
@@ -239,7 +269,12 @@ class ControllerNode(Node):
             return
         if new.reference != old.reference:
             self._t0 = None
-        if new.algorithm != old.algorithm or new.rate != old.rate or new.dmrac_initial != old.dmrac_initial:
+        # Effect states (creep lags, the Smith predictor's model) belong to one model: a new model with effects
+        # starts a fresh compensated controller, handed over bumplessly.
+        compensated = bool(new.effects or old.effects) and (
+            new.model != old.model or new.effects != old.effects or new.effect_values != old.effect_values)
+        if new.algorithm != old.algorithm or new.rate != old.rate or new.dmrac_initial != old.dmrac_initial \
+                or compensated:
             self._switch(new)
             return
         c.limits = new.limits
@@ -250,7 +285,8 @@ class ControllerNode(Node):
         self.get_logger().info("parameters applied: " + ", ".join(p.name for p in params))
 
     def _switch(self, s: ControllerSettings) -> None:
-        new = make_controller(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial)
+        new = make_controller(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial,
+                              s.compensation())
         self._ctrl = hand_over(new, self._ctrl, self._y) if math.isfinite(self._y) else None
         self._n["switches"] += 1
         self._skip = int(0.25 * s.rate)
@@ -265,18 +301,19 @@ class ControllerNode(Node):
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         self._ref = (t, _F(msg.position[0]), _F(v))
 
-    def _target(self, t_state: float, y: float) -> float:
+    def _target(self, t_state: float, y: float, ahead: float = 0.0) -> float:
+        """Reference for the next sample, ``ahead`` seconds further (a compensated delay's preview)."""
         gen = self._settings.reference
         if gen is not None:
             if self._t0 is None:
                 self._t0 = t_state
-            return gen(t_state + 1.0 / self._settings.rate - self._t0)
+            return gen(t_state + 1.0 / self._settings.rate + ahead - self._t0)
         if self._ref is None:
             return self._ctrl.last_reference if self._ctrl is not None else y  # hold where the stage is
         t_ref, r, v = self._ref
         # Linear extrapolation is only good for a few ms (a 5 Hz, 10 µm sine bends by 12 µm in 50 ms): a stale
-        # reference is extrapolated by at most 5 ms.
-        lead = min(max(t_state + 1.0 / self._settings.rate - t_ref, 0.0), 0.005)
+        # reference is extrapolated by at most 5 ms beyond the preview.
+        lead = min(max(t_state + 1.0 / self._settings.rate - t_ref, 0.0), 0.005) + ahead
         return r + v * lead
 
     def _on_state(self, msg: JointState) -> None:
@@ -294,7 +331,8 @@ class ControllerNode(Node):
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         if self._ctrl is None or self._tripped:
             u0 = _F(msg.effort[0]) if msg.effort and math.isfinite(msg.effort[0]) else s.limits.v_safe
-            c = make_controller(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial)
+            c = make_controller(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial,
+                                s.compensation())
             c.reset(y, u0, y if self._ref is None and s.reference is None else self._target(t, y))
             self._ctrl = c
             self._skip = int(0.25 * s.rate)
@@ -319,7 +357,8 @@ class ControllerNode(Node):
             st[2] = max(st[2], abs(e))
         r = self._target(t, y)
         self._pending = r
-        u = self._ctrl.step(r, y)
+        ahead = float(getattr(self._ctrl, "preview", 0.0))
+        u = self._ctrl.step(self._target(t, y, ahead) if ahead > 0 else r, y)
         self._publish_command(msg.header.stamp, u)
         if self._n["commands"] % s.state_decimation == 0:
             st = self._ctrl.state()
@@ -350,7 +389,7 @@ class ControllerNode(Node):
             self._n["watchdog_trips"] += 1
             self.get_logger().error(f"no /stage/state for {silent:.3f} s: commanding v_safe = {s.limits.v_safe} V")
         u = s.limits.apply(s.limits.v_safe, self._ctrl.last_command, 0.02)
-        self._ctrl._u_prev = u  # noqa: SLF001 - the watchdog owns the output while tripped
+        getattr(self._ctrl, "inner", self._ctrl)._u_prev = u  # noqa: SLF001 - the watchdog owns the output while tripped
         self._publish_command(self.get_clock().now().to_msg(), u)
 
     def _diagnostics(self) -> None:
@@ -369,7 +408,8 @@ class ControllerNode(Node):
             st.level = max(st.level, DiagnosticStatus.WARN)
             st.message += (f"; {others} other publisher(s) on {self._cmd_pub.topic_name}: another controller or "
                            "excitation is commanding this stage too")
-        vals = dict(self._n, algorithm=self._settings.algorithm, other_command_publishers=others)
+        vals = dict(self._n, algorithm=self._settings.algorithm, other_command_publishers=others,
+                    compensated=",".join(self._compensating))
         if self._unused:
             vals["unused_model_terms"] = self._unused
         if self._ctrl is not None:
@@ -395,21 +435,21 @@ class ControllerNode(Node):
     def _unused_model_terms(self) -> str:
         """What the params file (or a push) says about the stage that the control laws do not use, in words.
 
-        The laws invert the base MBW only; an identified effect (creep, delay, a resonance, ...) is not
-        compensated. That must be visible: '' when nothing is dropped.
+        Effects with an inverse are compensated (:mod:`hyst_control.compensation`); the rest (drift, a resonance,
+        a user effect unknown here) and ``model.*`` keys this node does not know must be visible: '' when
+        nothing is dropped.
         """
-        try:
-            effects = list(self.get_parameter("model.effects").value or [])
-        except ParameterUninitializedException:
-            effects = []
+        comp = self._settings.compensation()
+        self._compensating = comp.names
         extra = sorted(k for k in self._parameter_overrides
                        if k.startswith("model.") and not self.has_parameter(k))
-        if not effects and not extra:
-            return ""
-        what = f"effects {', '.join(effects)}" if effects else "effect parameters"
-        keys = f" ({', '.join(extra[:6])}{', ...' if len(extra) > 6 else ''})" if extra else ""
-        return (f"the model holds {what}{keys} that the control laws do not compensate: they use the base MBW "
-                f"only, so tracking sees these effects as disturbances")
+        parts = []
+        if comp.unused:
+            parts.append("the control laws do not compensate " + "; ".join(f"{k} ({v})" for k, v in comp.unused.items()))
+        if extra:
+            parts.append(f"model parameters unknown to this node are not used ({', '.join(extra[:6])}"
+                         f"{', ...' if len(extra) > 6 else ''})")
+        return "; ".join(parts)
 
     @property
     def counts(self) -> dict:

@@ -20,6 +20,7 @@ import numpy as np
 from hyst_model.core import MBWParams, pea_default
 
 from .base import BaseController
+from .compensation import Compensation, wrap
 from .dmrac import DMRAC, DMRACGains
 from .dppc import DPPC, DPPCGains
 from .errors import ConfigError, ControlError, LoopError
@@ -35,18 +36,24 @@ ALGORITHMS = ("dppc", "dmrac", "pid", "open_loop")
 
 
 def make_controller(algorithm: str, model: MBWParams, dt: float, limits: CommandLimits | None = None,
-                    gains=None, initial="model") -> BaseController:
-    """Build a controller by name (``dppc``, ``dmrac``, ``pid``, ``open_loop``)."""
+                    gains=None, initial="model", compensation: Compensation | None = None):
+    """Build a controller by name (``dppc``, ``dmrac``, ``pid``, ``open_loop``).
+
+    With a :class:`~hyst_control.compensation.Compensation` that uses any effect, the law is wrapped in
+    :class:`~hyst_control.compensation.Compensated` (the identified effects inverted around it).
+    """
     limits = limits or PEA_LIMITS
     if algorithm == "dppc":
-        return DPPC(model, dt, gains or DPPCGains(), limits)
-    if algorithm == "dmrac":
-        return DMRAC(model, dt, gains or DMRACGains(), initial, limits)
-    if algorithm == "pid":
-        return PID(dt, gains or PIDGains(), limits)
-    if algorithm == "open_loop":
-        return OpenLoop(model, dt, limits)
-    raise ConfigError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(ALGORITHMS)}")
+        c: BaseController = DPPC(model, dt, gains or DPPCGains(), limits)
+    elif algorithm == "dmrac":
+        c = DMRAC(model, dt, gains or DMRACGains(), initial, limits)
+    elif algorithm == "pid":
+        c = PID(dt, gains or PIDGains(), limits)
+    elif algorithm == "open_loop":
+        c = OpenLoop(model, dt, limits)
+    else:
+        raise ConfigError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(ALGORITHMS)}")
+    return wrap(c, compensation)
 
 
 def parse_schedule(text: str) -> list[tuple[str, float]]:
@@ -183,6 +190,9 @@ def run_closed_loop(controller: BaseController, reference: Reference | str, seco
     t = np.arange(n) * dt
     r, _ = ref.sample(t)
     r = np.atleast_1d(r)
+    # A compensated delay needs the reference ahead by its preview (the loop knows the whole reference).
+    preview = float(getattr(controller, "preview", 0.0))
+    r_ctrl = np.atleast_1d(ref.sample(t + preview)[0]) if preview > 0 else r
     y = np.empty(n)
     u = np.empty(n)
     rec = {k: np.empty(n) for k in record}
@@ -194,7 +204,7 @@ def run_closed_loop(controller: BaseController, reference: Reference | str, seco
         u_cmd = controller.step(r0, y_meas)
         y_meas = plant.step(u_cmd)
     for k in range(n):
-        u_cmd = controller.step(float(r[k]), y_meas)
+        u_cmd = controller.step(float(r_ctrl[k]), y_meas)
         y_meas = plant.step(u_cmd)
         y[k] = y_meas
         u[k] = u_cmd

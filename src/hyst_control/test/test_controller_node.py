@@ -126,22 +126,42 @@ def test_watchdog_commands_v_safe_and_reports_error(harness):
     assert not node._tripped  # noqa: SLF001
 
 
-def test_effects_of_a_params_file_are_reported_never_silently_dropped(harness, tmp_path):
-    """The laws use the base MBW only: an identified effect is named in the log and on /diagnostics."""
+def test_effects_of_a_params_file_are_compensated_or_reported_never_silently_dropped(harness, tmp_path):
+    """Creep and delay have inverses (compensated); drift and an unknown effect's keys are named on /diagnostics."""
     p = tmp_path / "stage.yaml"
-    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      effects: [creep, delay]\n"
+    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      effects: [creep, delay, drift]\n"
                  "      zeta1: 0.45\n      y_scale: 5.0e-06\n      dt: 0.001\n"
-                 "      creep:\n        gain: 0.01\n        tilt: 0.0\n      delay:\n        tau: 0.002\n")
+                 "      creep:\n        gain: 0.01\n        tilt: 0.0\n      delay:\n        tau: 0.002\n"
+                 "      drift:\n        c1: 1.0e-8\n      hum:\n        amp: 1.0e-9\n")
     node, peer, ex, pub, got = harness("--params-file", str(p))
-    assert "creep, delay" in node._unused and "model.creep.gain" in node._unused  # noqa: SLF001
+    assert node._compensating == ["creep", "delay"]  # noqa: SLF001
+    assert "drift" in node._unused and "model.hum.amp" in node._unused  # noqa: SLF001
+    assert "creep" not in node._unused  # noqa: SLF001
     assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
-    pub.publish(_state(0, 10e-6, 50.0))
-    assert _spin_until(ex, lambda: any(s.level >= DiagnosticStatus.WARN and "do not compensate" in s.message
-                                       for d in got["diag"] for s in d.status), 5.0)
+    for k in range(3):
+        pub.publish(_state(k, 10e-6, 50.0))
+        assert _spin_until(ex, lambda: len(got["cmd"]) > k)
+    assert math.isfinite(got["cmd"][-1].effort[0])
+    assert getattr(node._ctrl, "preview", 0.0) == pytest.approx(0.002)  # noqa: SLF001 - the delay's preview
+
+    def warned() -> bool:
+        return any(s.level >= DiagnosticStatus.WARN and "do not compensate drift" in s.message
+                   and any(v.key == "compensated" and v.value == "creep,delay" for v in s.values)
+                   for d in got["diag"] for s in d.status)
+
+    assert _spin_until(ex, warned, 5.0)
     plain = tmp_path / "plain.yaml"
     plain.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      zeta1: 0.45\n")
     node2, *_ = harness("--params-file", str(plain))
-    assert node2._unused == ""  # noqa: SLF001
+    assert node2._unused == "" and node2._compensating == []  # noqa: SLF001
+
+
+def test_an_effect_the_laws_cannot_invert_is_refused_with_a_reason(harness, tmp_path):
+    p = tmp_path / "stage.yaml"
+    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      effects: [creep]\n"
+                 "      creep:\n        gain: 0.29\n        tilt: 0.0\n")
+    with pytest.raises(Exception, match="creep"):
+        harness("--params-file", str(p))
 
 
 def test_a_second_command_publisher_is_reported(harness):

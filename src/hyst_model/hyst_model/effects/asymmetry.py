@@ -12,13 +12,16 @@ with centres ``u_c``, ``y_c`` fixed at the middle of the identification data (st
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..model import Param
 from .base import Effect
+from .online import OnlineEffect
 from .signals import corr
 
-__all__ = ["Asymmetry"]
+__all__ = ["Asymmetry", "AsymmetryInverse"]
 
 
 class Asymmetry(Effect):
@@ -47,6 +50,9 @@ class Asymmetry(Effect):
         yy = (y - self.y_c) / self.y_scale
         return y + self.y_scale * (theta[0] * uu * uu + theta[1] * yy * yy)
 
+    def online(self, theta, base=None):
+        return AsymmetryInverse(float(theta[0]), float(theta[1]), self.u_c, self.y_c, self.u_scale, self.y_scale)
+
     def start(self, t, u, y, residual):
         # Centre on the data, then regress the residual on the even input term.
         self.u_c = 0.5 * (float(np.min(u)) + float(np.max(u)))
@@ -66,3 +72,28 @@ class Asymmetry(Effect):
         return score, (f"the residual is an even function of the input: it has the same sign at both ends of the "
                        f"stroke and the opposite sign in the middle (corr with (u-u_mid)² = {c:+.2f}, "
                        f"with u = {c_odd:+.2f}); the measurement sits higher at {end} → asymmetric loop")
+
+
+class AsymmetryInverse(OnlineEffect):
+    """The quadratic terms inverted per sample: with z = (x − y_c)/y_scale and q = a_u·ũ² − (y − y_c)/y_scale the
+    output equation is a_y·z² + z + q = 0; the root on the identity branch is z = −2q / (1 + √(1 − 4·a_y·q)).
+    Beyond the fold (1 − 4·a_y·q < 0) no x gives y: the fold itself (z = −1/(2·a_y)) is returned."""
+
+    name = "asymmetry"
+
+    def __init__(self, a_u: float, a_y: float, u_c: float, y_c: float, u_scale: float, y_scale: float) -> None:
+        self._au, self._ay, self._uc, self._yc = a_u, a_y, u_c, y_c
+        self._us, self._ys = u_scale, y_scale
+
+    def _inner(self, y: float, u: float) -> float:
+        uu = (u - self._uc) / self._us
+        q = self._au * uu * uu - (y - self._yc) / self._ys
+        disc = 1.0 - 4.0 * self._ay * q
+        z = -2.0 * q / (1.0 + math.sqrt(disc)) if disc >= 0.0 else -1.0 / (2.0 * self._ay)
+        return self._yc + self._ys * z
+
+    def measure(self, y, u):
+        return self._inner(y, u)
+
+    def target(self, r, u):
+        return self._inner(r, u)

@@ -31,12 +31,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 from ..errors import EffectError
 from ..model import Model, Param
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from .online import OnlineEffect, Stepper
 
 __all__ = ["Effect", "Inner", "ComposedModel", "KINDS"]
 
@@ -88,6 +91,8 @@ class Effect:
     #: Base parameters a kind-``base`` effect still reads (None: all of them). An effect that replaces the
     #: base recursion outright lists only those it keeps (e.g. ``("offset",)``), so fitters skip the rest.
     base_params_used: ClassVar[tuple[str, ...] | None] = None
+    #: Why the controllers cannot use this effect, shown when :meth:`online` returns None.
+    online_note: ClassVar[str] = "it has no per-sample form (Effect.online), so the controllers cannot compensate it"
 
     def __init__(self, config: Mapping[str, object] | None = None):
         cfg = dict(config or {})
@@ -125,6 +130,15 @@ class Effect:
         if self.kind == "output":
             return self.output(theta, t, u, inner(t, u))
         raise NotImplementedError(f"effect {self.name!r} of kind {self.kind!r} must implement apply()")
+
+    # --- how controllers use it ----------------------------------------------------------------------------
+    def online(self, theta: np.ndarray, base: Callable[[], "Stepper"] | None = None) -> "OnlineEffect | None":
+        """Per-sample inverse for controllers (:mod:`hyst_model.effects.online`), or None if there is none.
+
+        ``theta`` are the local parameters; ``base`` makes a fresh per-sample base model (a Smith predictor needs
+        it). None means the controllers cannot use this effect: they report it with :attr:`online_note`.
+        """
+        return None
 
     # --- how it is found ----------------------------------------------------------------------------------
     @classmethod

@@ -21,9 +21,10 @@ from numba import njit
 
 from ..model import Param
 from .base import Effect
+from .online import OnlineEffect
 from .signals import holds, sample_time
 
-__all__ = ["Creep", "creep_lags", "TAUS", "PER_DECADE"]
+__all__ = ["Creep", "CreepInverse", "creep_lags", "TAUS", "PER_DECADE"]
 
 PER_DECADE = 3
 #: Time constants of the creep operator (s): 0.01 s … 300 s.
@@ -85,6 +86,9 @@ class Creep(Effect):
             return y
         return y - gain * creep_term(t, y, tilt)
 
+    def online(self, theta, base=None):
+        return CreepInverse(float(theta[0]), float(theta[1]), self.dt)
+
     def start(self, t, u, y, residual):
         # residual ≈ −gain · creep_term(x) with x ≈ the base model's output = y − residual.
         b = creep_term(np.asarray(t, float), np.asarray(y, float) - residual)
@@ -121,3 +125,38 @@ class Creep(Effect):
         return score, (f"after each step the residual keeps moving the same way relative to the step for seconds, "
                        f"linearly in log time (median R² {np.median(fits):.2f} over {len(slopes)} holds, "
                        f"{per_decade:.3g} nm per volt of step per decade of time, consistent in {same:.0%})")
+
+
+class CreepInverse(OnlineEffect):
+    """The creep operator inverted exactly, sample by sample (controllers).
+
+    With the lags updated by the new sample, c_i ← a_i·c_i + (1 − a_i)·x, the output is
+    y = x − g·N·Σ w_i·a_i·(x − c_i) (c_i before the update, N = n/PER_DECADE), linear in x:
+    x = (y − g·N·Σ w_i a_i c_i) / (1 − g·N·Σ w_i a_i). The lags are then driven by the recovered x, so the
+    inverse follows the stage's own creep history.
+    """
+
+    name = "creep"
+
+    def __init__(self, gain: float, tilt: float, dt: float) -> None:
+        self._a = np.exp(-dt / TAUS)
+        self._wa = _weights(tilt) * self._a
+        self._g = gain * TAUS.size / PER_DECADE
+        self._den = 1.0 - self._g * float(self._wa.sum())
+        if not self._den > 0.05:  # gain·N·Σ w a ≥ 0.95: the operator is not invertible per sample
+            raise ValueError(f"creep gain {gain:g} is too large to invert per sample")
+        self._c = np.zeros(TAUS.size)
+
+    def reset(self, y, u):
+        self._c[:] = y  # at rest the lags sit at the displacement: no creep deficit
+
+    def _inner(self, y: float) -> float:
+        return (y - self._g * float(self._wa @ self._c)) / self._den
+
+    def measure(self, y, u):
+        x = self._inner(y)
+        self._c = self._a * self._c + (1.0 - self._a) * x
+        return x
+
+    def target(self, r, u):
+        return self._inner(r)

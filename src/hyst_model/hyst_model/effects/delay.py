@@ -12,9 +12,10 @@ import numpy as np
 from ..errors import EffectError
 from ..model import Param
 from .base import Effect
+from .online import OnlineEffect
 from .signals import corr, rate_of
 
-__all__ = ["Delay"]
+__all__ = ["Delay", "DelayPredictor"]
 
 
 SIDES = ("input", "output")
@@ -70,6 +71,14 @@ class Delay(Effect):
         if tau <= 0.0:
             return y
         return np.interp(t - tau, t, y, left=y[0])
+
+    def online(self, theta, base=None):
+        tau = float(theta[0])
+        if tau <= 0.0:
+            return OnlineEffect()
+        if base is None:
+            return None
+        return DelayPredictor(tau, self.dt, self.side, base)
 
     def start(self, t, u, y, residual):
         """τ from the data's own impulse response, else from shifting the base model's output.
@@ -138,3 +147,57 @@ def _fir_delay(u: np.ndarray, y: np.ndarray, lags: int) -> float | None:
     if lo > 0:
         return k - lo / (h[k] + lo)
     return float(k)
+
+
+class DelayPredictor(OnlineEffect):
+    """Smith predictor for a transport delay τ: the controller sees the measurement plus the base model's
+    undelayed minus delayed prediction (what the stage would read now without the delay, corrected by every
+    model error the delayed measurement shows), and aims at the reference τ ahead (:attr:`preview`).
+
+    Parameters
+    ----------
+    tau : float
+        Delay (s).
+    dt : float
+        Sample period (s).
+    side : {"input", "output"}
+        Where the delay acts (:class:`Delay`): on the input, the delayed prediction runs the base model on the
+        delayed input; on the output, it is the undelayed prediction delayed.
+    base : callable
+        Makes a fresh per-sample base model (:class:`~hyst_model.effects.online.Stepper`).
+    """
+
+    name = "delay"
+
+    def __init__(self, tau: float, dt: float, side: str, base) -> None:
+        self.preview = tau
+        d = tau / dt
+        self._k0 = int(np.floor(d))
+        self._frac = d - self._k0
+        self._hist = np.zeros(self._k0 + 2)  # input (input side) or prediction (output side), newest first
+        self._side = side
+        self._now = base()
+        self._late = base() if side == "input" else None
+
+    def reset(self, y, u):
+        x0 = self._now.reset(u)
+        if self._late is not None:
+            self._late.reset(u)
+            self._hist[:] = u
+        else:
+            self._hist[:] = x0
+
+    def _delayed(self) -> float:
+        h = self._hist
+        return (1.0 - self._frac) * h[self._k0] + self._frac * h[self._k0 + 1]
+
+    def measure(self, y, u):
+        x_now = self._now.step(u)
+        self._hist[1:] = self._hist[:-1]
+        if self._late is not None:
+            self._hist[0] = u
+            x_late = self._late.step(self._delayed())
+        else:
+            self._hist[0] = x_now
+            x_late = self._delayed()
+        return y + x_now - x_late

@@ -30,6 +30,8 @@ class Drift(Effect):
     physics = ("The reading wanders slowly over the record even where the input repeats itself; the model's "
                "error at the same input level differs between early and late in the record.")
     kind = "output"
+    online_note = ("an input-independent offset trend tied to the identification record's clock: nothing to invert "
+                   "at run time; the feedback removes a slow offset (not compensated)")
 
     def __init__(self, config=None):
         super().__init__(config)

@@ -247,6 +247,8 @@ class DynamicsEffect(Effect):
                "hysteresis drives the resonant stage (series), or the hysteresis is part of the spring force of "
                "a mass-spring-damper (feedback, as in the Bouc-Wen benchmark).")
     kind = "wrap"
+    online_note = ("a stage resonance after the hysteresis: the control laws do not invert it, it acts on the loop "
+                   "as unmodelled dynamics (the controller checks its gains against it)")
 
     def __init__(self, config: Mapping[str, object] | None = None):
         super().__init__(config)

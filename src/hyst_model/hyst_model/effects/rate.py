@@ -26,6 +26,7 @@ class Rate(Effect):
     physics = ("The loop gets wider and tilts as the input moves faster (dielectric and eddy-current losses), "
                "so a rate-independent Bouc-Wen fits slow motion but misses fast motion.")
     kind = "base"
+    online_note = "rate terms of a Bouc-Wen base: the controllers invert the MBW, which has them built in"
     bases = ("bw",)
 
     def params(self):

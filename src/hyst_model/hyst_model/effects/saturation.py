@@ -13,13 +13,16 @@ from the data's input sign in :meth:`Saturation.start` and stored in the params 
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..model import Param
 from .base import Effect
+from .online import OnlineEffect
 from .signals import corr
 
-__all__ = ["Saturation", "soft_limit"]
+__all__ = ["Saturation", "SaturationInverse", "soft_limit"]
 
 
 def soft_limit(x: np.ndarray, top: float, bottom: float, w: float, two_sided: bool) -> np.ndarray:
@@ -63,6 +66,9 @@ class Saturation(Effect):
         top, bottom, w = float(theta[0]), float(theta[1]), float(theta[2])
         return soft_limit(y, top, bottom, w, self.two_sided)
 
+    def online(self, theta, base=None):
+        return SaturationInverse(float(theta[0]), float(theta[1]), float(theta[2]), self.two_sided)
+
     def start(self, t, u, y, residual):
         self.two_sided = bool(np.min(u) < -0.05 * np.max(np.abs(u)))
         x = np.asarray(y, float) - residual  # ≈ base model output
@@ -93,3 +99,41 @@ class Saturation(Effect):
         score = float(np.clip(c, 0.0, 1.0))
         return score, (f"near the end of the stroke the measurement falls short of the model, more the further "
                        f"out (corr {c:+.2f} with a shortfall growing beyond the knee) → the travel saturates")
+
+
+class SaturationInverse(OnlineEffect):
+    """The soft limit inverted per sample: x = k + w·artanh((y − k)/w) beyond a knee k. A target at or beyond an
+    asymptote cannot be reached: it is held at :attr:`REACH` of the way from the knee to the asymptote (the stage's
+    limit is respected, not chased with an unbounded input) and counted in :attr:`limited`."""
+
+    name = "saturation"
+    #: Fraction of the knee width a target may reach (tanh(2.65) = 0.99: 2.65 widths into the knee).
+    REACH = 0.99
+
+    def __init__(self, top: float, bottom: float, width: float, two_sided: bool) -> None:
+        self._top, self._bot, self._w, self._two = top, bottom, width, two_sided
+        self.limited = 0
+
+    def _inner(self, y: float) -> float:
+        w = self._w
+        k = self._top - w
+        if y > k:
+            return k + w * math.atanh(min((y - k) / w, self.REACH))
+        if self._two:
+            k = self._bot + w
+            if y < k:
+                return k - w * math.atanh(min((k - y) / w, self.REACH))
+        return y
+
+    def measure(self, y, u):
+        return self._inner(y)
+
+    def target(self, r, u):
+        lo, hi = self.bounds()
+        if not lo < r < hi:
+            self.limited += 1
+        return self._inner(r)
+
+    def bounds(self):
+        span = self.REACH * self._w
+        return (self._bot + self._w - span if self._two else -math.inf, self._top - self._w + span)

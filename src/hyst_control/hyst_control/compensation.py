@@ -1,0 +1,292 @@
+"""The controllers on the model the user identified: the base MBW law plus the effects as compensation.
+
+A params file holds the base MBW and the effects the diagnosis named (``model.effects``). The control laws
+(DPPC (4.11)–(4.14), DMRAC (5.22)–(5.25), the open-loop inverse) are one-step inversions of the base MBW (3.21);
+the effects enter around them (:mod:`hyst_model.effects.online`):
+
+* output-side effects with an inverse (creep, asymmetry, saturation) are inverted on the measurement and on the
+  reference, so the law tracks the base model's output that makes the *measured* output follow the reference;
+  a saturating stroke bounds the reachable reference (a target beyond it is held at the limit and counted);
+* a transport delay is handled by a Smith predictor (the base model's undelayed minus delayed prediction is added
+  to the measurement) and the reference is taken ``preview`` seconds ahead;
+* an effect without a per-sample form (drift: tied to the identification record's clock; a stage resonance:
+  the stability check's business; a user effect without :meth:`~hyst_model.effects.Effect.online`) is listed in
+  :attr:`Compensation.unused` with the reason, which the node logs and puts on ``/diagnostics``: never dropped
+  silently.
+
+:class:`Compensated` wraps any controller of this package with a :class:`Compensation`; it speaks the same
+protocol (SI in and out), so the loop, the node and bumpless switching use it unchanged.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+from hyst_model.core import MBWParams
+
+from .base import BaseController
+from .errors import ConfigError
+
+__all__ = ["Compensation", "Compensated", "plan_compensation", "from_params", "wrap", "effect_parameters"]
+
+
+@dataclass
+class Compensation:
+    """The usable effects (innermost first) and the reasons for the others.
+
+    Attributes
+    ----------
+    used : list of OnlineEffect
+        Per-sample inverses, in the params file's order (first = innermost).
+    unused : dict
+        Effect name → why the controllers cannot use it.
+    """
+
+    used: list = field(default_factory=list)
+    unused: dict = field(default_factory=dict)
+
+    @property
+    def names(self) -> list[str]:
+        return [e.name for e in self.used]
+
+    @property
+    def preview(self) -> float:
+        """Seconds of reference preview needed (the sum of the delays compensated)."""
+        return float(sum(e.preview for e in self.used))
+
+    @property
+    def limited(self) -> int:
+        """References that lay beyond a saturating stroke (held at the limit)."""
+        return int(sum(getattr(e, "limited", 0) for e in self.used))
+
+    def bounds(self) -> tuple[float, float]:
+        """Reachable range of the measured output (m)."""
+        lo, hi = -math.inf, math.inf
+        for e in self.used:
+            a, b = e.bounds()
+            lo, hi = max(lo, a), min(hi, b)
+        return lo, hi
+
+    def reset(self, y: float, u: float) -> float:
+        """Start at rest at measured ``y`` under ``u``; returns the base model's output there."""
+        x = y
+        for e in reversed(self.used):
+            e.reset(x, u)
+            x = e.target(x, u)
+        return x
+
+    def measure(self, y: float, u: float) -> float:
+        """Measured output → base model output (advances the effects' states)."""
+        for e in reversed(self.used):
+            y = e.measure(y, u)
+        return y
+
+    def target(self, r: float, u: float) -> float:
+        """Reference → base model output that produces it."""
+        for e in reversed(self.used):
+            r = e.target(r, u)
+        return r
+
+    def describe(self) -> str:
+        """One sentence for logs and /diagnostics ('' when there is nothing to say)."""
+        parts = []
+        if self.used:
+            parts.append("compensating " + ", ".join(self.names)
+                         + (f" (reference previewed {self.preview * 1e3:.3g} ms)" if self.preview > 0 else ""))
+        if self.unused:
+            parts.append("not compensated: " + "; ".join(f"{k}: {v}" for k, v in self.unused.items()))
+        return "; ".join(parts)
+
+
+def plan_compensation(model: MBWParams, effects: Sequence[str], values: Mapping[str, float],
+                      config: Mapping[str, object] | None = None, dt: float | None = None) -> Compensation:
+    """Build the compensation for ``model`` + ``effects`` with fitted ``values`` (``"creep.gain"`` → value).
+
+    Parameters
+    ----------
+    model : MBWParams
+        The base model the law inverts.
+    effects : sequence of str
+        Effect names in the params file's order (first innermost).
+    values : mapping
+        Effect parameters, dotted (``creep.gain``), SI. Every parameter of every effect must be present.
+    config : mapping, optional
+        Effect configuration (``asymmetry.u_c``, ``delay.side``, ...), as in the params file.
+    dt : float, optional
+        Loop period (s); default ``config["dt"]``.
+
+    Raises
+    ------
+    ConfigError
+        Unknown effect, a missing parameter, or an effect whose inverse does not exist at these values.
+    """
+    from hyst_model.effects.online import MBWStepper  # noqa: PLC0415 - effects load numba; only when used
+    from hyst_model.errors import HystError  # noqa: PLC0415
+    from hyst_model.spec import build_model  # noqa: PLC0415
+
+    from hyst_model.effects import EFFECTS  # noqa: PLC0415
+
+    comp = Compensation()
+    effects = [str(e) for e in effects]
+    for e in effects:
+        if e not in EFFECTS:  # a user effect whose module this process did not load
+            comp.unused[e] = "unknown to this process (a user effect?): the controllers cannot use it"
+    effects = [e for e in effects if e in EFFECTS]
+    if not effects:
+        return comp
+    cfg = {k: v for k, v in dict(config or {}).items()}
+    cfg.update(u_scale=model.u_scale, y_scale=model.y_scale, offset=model.offset)
+    if dt is not None:
+        cfg["dt"] = float(dt)
+    try:
+        composed = build_model("mbw", effects, cfg)
+    except (HystError, ValueError, TypeError) as err:
+        raise ConfigError(f"cannot build the model's effects {', '.join(effects)}: {err}") from err
+    for e in composed.effects:
+        names = [p.name for p in e.params()]
+        missing = [n for n in names if f"{e.name}.{n}" not in values]
+        if missing:
+            raise ConfigError(f"effect {e.name}: parameter(s) {', '.join(e.name + '.' + n for n in missing)} "
+                              "missing from the model")
+        theta = [float(values[f"{e.name}.{n}"]) for n in names]
+        for p, v in zip(e.params(), theta):
+            if not (math.isfinite(v) and p.lower <= v <= p.upper):
+                raise ConfigError(f"effect {e.name}: {e.name}.{p.name} = {v:g} {p.unit} lies outside "
+                                  f"[{p.lower:g}, {p.upper:g}]")
+        try:
+            on = e.online(theta, base=lambda: MBWStepper(model))
+        except (ValueError, ArithmeticError) as err:
+            raise ConfigError(f"effect {e.name} cannot be inverted for control: {err}") from err
+        except Exception as err:  # a user effect's online() failing: name it, do not crash the controller
+            raise ConfigError(f"effect {e.name}: its online() failed ({type(err).__name__}: {err})") from err
+        if on is None:
+            comp.unused[e.name] = getattr(e, "online_note", "no per-sample form")
+        else:
+            on.name = e.name
+            comp.used.append(on)
+    return comp
+
+
+def effect_parameters(dt: float, u_scale: float, y_scale: float) -> dict[str, tuple[object, str]]:
+    """Every built-in effect's parameters and configuration keys as node parameters.
+
+    Returns ``{"creep.gain": (default, description), "delay.side": ("input", ...), ...}``: the identity values
+    (an effect at its defaults changes nothing), so a node can declare them all and take any params file or push.
+    Effects with several configurations (dynamics' structures) contribute the union of their parameters.
+    """
+    from hyst_model.effects import EFFECTS  # noqa: PLC0415
+
+    base = {"dt": dt, "u_scale": u_scale, "y_scale": y_scale}
+    out: dict[str, tuple[object, str]] = {}
+    for name in sorted(EFFECTS):
+        cls = EFFECTS[name]
+        variants = cls.variants() if hasattr(cls, "variants") else [{}]
+        for var in variants:
+            e = cls({**base, **var})
+            for p in e.params():
+                out.setdefault(f"{name}.{p.name}", (float(p.default), f"{name}: {p.doc} ({p.unit or '-'})"))
+            for k, v in e.config().items():
+                out.setdefault(f"{name}.{k}", (v, f"{name} configuration (params file)"))
+    return out
+
+
+def from_params(spec, dt: float | None = None) -> tuple[MBWParams, Compensation]:
+    """The base MBW and the compensation of a params file (:class:`hyst_model.io.params_file.ParamsSpec`).
+
+    Raises
+    ------
+    ConfigError
+        Base other than ``mbw``, missing base parameters or scales, or an effect that cannot be planned.
+    """
+    from hyst_model.core import PARAM_NAMES  # noqa: PLC0415
+
+    if spec.base != "mbw":
+        raise ConfigError(f"the controllers invert the MBW model: model.base must be 'mbw', not {spec.base!r}")
+    vals, cfg = dict(spec.values), dict(spec.config)
+    missing = [n for n in PARAM_NAMES if n not in vals] + [k for k in ("u_scale", "y_scale") if k not in cfg]
+    if missing:
+        raise ConfigError(f"params lack {', '.join(missing)}")
+    model = MBWParams(**{n: float(vals[n]) for n in PARAM_NAMES}, u_scale=float(cfg["u_scale"]),
+                      y_scale=float(cfg["y_scale"]), offset=float(vals.get("offset", 0.0)))
+    mdt = cfg.get("dt")
+    return model, plan_compensation(model, spec.effects, vals, cfg, dt if dt is not None else mdt)
+
+
+class Compensated:
+    """A controller running on the base model's output, with the effects inverted around it.
+
+    Same protocol as :class:`~hyst_control.base.BaseController` (SI in and out, ``reset``/``step``/``state``);
+    everything else (limits, gains, ``set_model``, ``sync_applied``, ...) is the inner controller's.
+
+    Parameters
+    ----------
+    inner : BaseController
+        The law (its measurement and reference become base-model outputs).
+    comp : Compensation
+    """
+
+    def __init__(self, inner: BaseController, comp: Compensation) -> None:
+        self.inner = inner
+        self.comp = comp
+        self.name = inner.name
+        # Open loop never reads the sensor: its effect states follow what it aimed at (an internal model).
+        self._internal = inner.name == "open_loop"
+        self._r_prev = math.nan
+        self._r_aim = math.nan
+        self._y_prev = math.nan
+        # References passed, newest first: with a preview of d samples the newest measurement answers the one
+        # passed d + 1 samples ago (the published error compares with that, not with a future reference).
+        self._passed: deque[float] = deque(maxlen=int(round(comp.preview / inner.dt)) + 1)
+
+    def __getattr__(self, item):  # limits, dt, gains, set_model, sync_applied, notice_gap, ...
+        return getattr(self.inner, item)
+
+    @property
+    def preview(self) -> float:
+        return self.comp.preview
+
+    @property
+    def last_reference(self) -> float:
+        return self._r_prev
+
+    def reset(self, y0: float, u0: float, r0: float | None = None) -> None:
+        if not math.isfinite(y0):
+            raise ConfigError("reset needs a finite measurement y0")
+        r0 = y0 if r0 is None or not math.isfinite(r0) else float(r0)
+        x0 = self.comp.reset(float(y0), float(u0))
+        self.inner.reset(x0, u0, self.comp.target(r0, float(u0)))
+        self._r_prev = self._r_aim = r0
+        self._y_prev = float(y0)
+        self._passed.clear()
+        self._passed.extend([r0] * self._passed.maxlen)
+
+    def step(self, r_k: float, y_k: float) -> float:
+        inner = self.inner
+        if inner.last_command != inner.last_command:  # never reset: start from the safe output, as the laws do
+            self.reset(y_k if math.isfinite(y_k) else 0.0, inner.limits.v_safe, r_k)
+        u_prev = inner.last_command
+        if not math.isfinite(r_k):
+            r_k = self._r_prev
+        if math.isfinite(y_k):
+            seen = self._r_aim if self._internal and math.isfinite(self._r_aim) else y_k
+            x = self.comp.measure(seen, u_prev)
+        else:
+            x = y_k  # the law counts and holds on a bad sample
+        u = inner.step(self.comp.target(r_k, u_prev), x)
+        self._r_aim = self._passed[-1]
+        self._passed.appendleft(r_k)
+        self._r_prev, self._y_prev = r_k, y_k
+        return u
+
+    def state(self) -> dict[str, float]:
+        s = dict(self.inner.state())
+        s["error"] = self._y_prev - self._r_aim  # the published error is on the measured output, in m
+        s["limited"] = float(self.comp.limited)
+        return s
+
+
+def wrap(controller: BaseController, comp: Compensation | None) -> BaseController | Compensated:
+    """``controller`` with ``comp`` around it, or unchanged when nothing is compensated."""
+    return Compensated(controller, comp) if comp is not None and comp.used else controller

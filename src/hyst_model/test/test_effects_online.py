@@ -1,0 +1,103 @@
+"""Per-sample effect inverses (controllers) against the effects' own batch simulation: exact known answers."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hyst_model.core import pea_default
+from hyst_model.core.mbw import mbw_simulate
+from hyst_model.effects import EFFECTS
+from hyst_model.effects.online import MBWStepper, OnlineEffect
+from hyst_model.models import BASE_MODELS
+
+DT = 5e-4
+CFG = {"dt": DT, "u_scale": 15.0, "y_scale": 5.42e-6}
+
+
+def _record(n: int = 6000, seed: int = 0):
+    """A base-model output under steps and a sine (SI), with its input."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * DT
+    u = 75 + 40 * np.sin(2 * np.pi * 3 * t) + np.repeat(rng.uniform(-30, 30, n // 500 + 1), 500)[:n]
+    m = pea_default()
+    x = m.y_scale * mbw_simulate(np.ascontiguousarray(m.vector), u / m.u_scale) + m.offset
+    return t, u, x
+
+
+def _recover(inv: OnlineEffect, y: np.ndarray, u: np.ndarray) -> np.ndarray:
+    inv.reset(float(y[0]), float(u[0]))
+    return np.array([inv.measure(float(a), float(b)) for a, b in zip(y, u)])
+
+
+@pytest.mark.parametrize("gain,tilt", [(0.02, 0.0), (0.08, 0.2), (-0.03, -0.1)])
+def test_creep_inverse_recovers_the_displacement_exactly(gain, tilt):
+    t, u, x = _record()
+    x = x - x[0] + 1e-6  # at rest at the start, as the lags assume
+    eff = EFFECTS["creep"](CFG)
+    y = eff.output(np.array([gain, tilt]), t, u, x)
+    assert np.max(np.abs(y - x)) > 1e-8  # the creep is really there
+    inv = eff.online(np.array([gain, tilt]))
+    inv.reset(float(x[0]), float(u[0]))
+    xr = np.array([inv.measure(float(a), float(b)) for a, b in zip(y, u)])
+    assert np.max(np.abs(xr - x)) < 1e-12
+    # target() is the same inverse without advancing the lags: asked twice, the same answer
+    assert inv.target(float(y[-1]), float(u[-1])) == inv.target(float(y[-1]), float(u[-1]))
+
+
+def test_asymmetry_inverse_recovers_the_displacement_exactly():
+    t, u, x = _record()
+    eff = EFFECTS["asymmetry"](CFG)
+    eff.u_c, eff.y_c = 75.0, float(np.mean(x))
+    theta = np.array([0.03, -0.04])
+    y = eff.output(theta, t, u, x)
+    assert np.max(np.abs(y - x)) > 1e-8
+    xr = _recover(eff.online(theta), y, u)
+    assert np.max(np.abs(xr - x)) < 1e-12
+
+
+def test_saturation_inverse_exact_inside_and_limited_beyond():
+    t, u, x = _record()
+    eff = EFFECTS["saturation"](CFG)
+    span = float(x.max() - x.min())
+    theta = np.array([x.max() - 0.1 * span, x.min() - span, 0.2 * span])
+    y = eff.output(theta, t, u, x)
+    inv = eff.online(theta)
+    xr = _recover(inv, y, u)
+    inside = (y - (theta[0] - theta[2])) / theta[2] < inv.REACH  # within the invertible part of the knee
+    assert inside.mean() > 0.9
+    assert np.max(np.abs(xr[inside] - x[inside])) < 1e-12
+    lo, hi = inv.bounds()
+    assert hi < theta[0] and math.isinf(lo)
+    assert math.isfinite(inv.target(theta[0] + 1e-3, 0.0)) and inv.limited == 1
+
+
+@pytest.mark.parametrize("side", ["input", "output"])
+def test_delay_smith_predictor_sees_the_undelayed_stage(side):
+    """On a perfect model the predictor's value is the undelayed base output, whatever the delay."""
+    t, u, x = _record(4000)
+    cfg = dict(CFG, **{"delay.side": side})
+    eff = EFFECTS["delay"](cfg)
+    tau = 7.4 * DT
+    m = pea_default()
+    base = BASE_MODELS["mbw"](CFG)
+    theta_b = base.pack(m.to_dict())
+    if side == "input":
+        y = base.simulate(theta_b, t, eff.input(np.array([tau]), t, u))
+    else:
+        y = eff.output(np.array([tau]), t, u, base.simulate(theta_b, t, u))
+    inv = eff.online(np.array([tau]), base=lambda: MBWStepper(m))
+    assert inv.preview == pytest.approx(tau)
+    inv.reset(float(y[0]), float(u[0]))
+    xr = np.array([inv.measure(float(a), float(b)) for a, b in zip(y, u)])
+    x_now = base.simulate(theta_b, t, u)
+    assert np.max(np.abs(y - x_now)) > 1e-8
+    assert np.max(np.abs(xr - x_now)) < 1e-9
+
+
+def test_effects_without_online_form_say_why():
+    for name in ("drift", "dynamics"):
+        eff = EFFECTS[name](CFG)
+        assert eff.online(np.array([p.default for p in eff.params()])) is None
+        assert len(eff.online_note) > 20
