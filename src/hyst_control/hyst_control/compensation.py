@@ -129,7 +129,7 @@ def plan_compensation(model: MBWParams, effects: Sequence[str], values: Mapping[
     from hyst_model.effects import EFFECTS  # noqa: PLC0415
 
     comp = Compensation()
-    effects = [str(e) for e in effects]
+    effects = order = [str(e) for e in effects]
     for e in effects:
         if e not in EFFECTS:  # a user effect whose module this process did not load
             comp.unused[e] = "unknown to this process (a user effect?): the controllers cannot use it"
@@ -166,6 +166,7 @@ def plan_compensation(model: MBWParams, effects: Sequence[str], values: Mapping[
         else:
             on.name = e.name
             comp.used.append(on)
+    comp.unused = {e: comp.unused[e] for e in order if e in comp.unused}  # in the params file's order
     return comp
 
 
