@@ -3,6 +3,11 @@
 Example::
 
     hyst track --algorithm dppc --reference sine:10 --seconds 2 --rate 2000 --json
+    hyst track --params stage.yaml --scenario hidden_creep --reference c1     # the identified model, compensated
+
+``--params`` runs the controller with the model of a params file — its base MBW and, unless ``--no-effects``, its
+effects as compensation (:mod:`hyst_control.compensation`); ``--scenario`` makes the simulated stage a hidden-effect
+scenario (a file, or the name of one shipped with hyst_sim, e.g. ``hidden_creep``).
 """
 from __future__ import annotations
 
@@ -29,7 +34,8 @@ def register(subparsers) -> None:
     p.add_argument("--reference", default="sine:10",
                    help="step, ramp, step+ramp, sine:F[:A_um], c1, c2, c3, case3 (default sine:10)")
     p.add_argument("--seconds", type=float, default=1.0, help="length of the run (s), default 1")
-    p.add_argument("--rate", type=float, default=2000.0, help="loop rate (Hz), default 2000 (thesis)")
+    p.add_argument("--rate", type=float, default=None,
+                   help="loop rate (Hz), default 2000 (thesis), or the params file's 1/dt")
     p.add_argument("--mismatch", type=float, default=0.0,
                    help="relative model error of the controller's model, e.g. 0.2 (default 0)")
     p.add_argument("--initial", default="model", help="DMRAC initial estimates: model, cs0, cs1, cs2, cs3")
@@ -39,6 +45,13 @@ def register(subparsers) -> None:
                    help="set one gain of the algorithm (repeatable), e.g. --gain kappa1=0.5 --gain a_m=0.3; names "
                         "as the controller node's <algorithm>.<name> parameters")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed")
+    p.add_argument("--params", default=None, metavar="P.yaml",
+                   help="controller model from this params file (hyst fit / hyst diagnose --out); default: the "
+                        "embedded stage model. Its effects are compensated unless --no-effects")
+    p.add_argument("--no-effects", action="store_true", help="with --params: use its base MBW only")
+    p.add_argument("--scenario", default=None, metavar="S.yaml",
+                   help="simulated stage: a hidden-effect scenario file or a shipped name (hidden_creep, ...); "
+                        "default: the embedded stage")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -65,6 +78,63 @@ def _gains(args: argparse.Namespace, classes: dict):
     return cls(**kw) if kw else None
 
 
+def _params_rate(path: str) -> float:
+    """1/dt of a params file (2000 Hz when it has no dt)."""
+    from hyst_model.errors import HystError  # noqa: PLC0415
+    from hyst_model.io.params_file import read_params  # noqa: PLC0415
+
+    try:
+        mdt = read_params(path).config.get("dt")
+    except HystError as err:
+        raise ConfigError(str(err)) from err
+    return 1.0 / float(mdt) if mdt else 2000.0
+
+
+def _params_model(path: str, rate: float, no_effects: bool):
+    """Base MBW and compensation of a params file; its ``dt`` must match the loop rate."""
+    from hyst_model.errors import HystError  # noqa: PLC0415
+    from hyst_model.io.params_file import read_params  # noqa: PLC0415
+
+    from .compensation import Compensation, from_params  # noqa: PLC0415
+
+    try:
+        spec = read_params(path)
+    except HystError as err:
+        raise ConfigError(str(err)) from err
+    mdt = spec.config.get("dt")
+    if mdt and abs(float(mdt) * rate - 1.0) > 1e-6:
+        raise ConfigError(f"{path} was identified at dt = {float(mdt):g} s: run with --rate {1.0 / float(mdt):g} "
+                          "(the MBW recursion is per sample)")
+    if no_effects:
+        spec.effects = []
+    model, comp = from_params(spec, 1.0 / rate)
+    return model, comp if comp.used or comp.unused else Compensation()
+
+
+def _plant(scenario: str, rate: float, seed: int):
+    """The embedded stage with a hidden-effect scenario (a file, or a name shipped with hyst_sim)."""
+    from pathlib import Path  # noqa: PLC0415
+
+    from hyst_sim.errors import SimError  # noqa: PLC0415
+    from hyst_sim.plant import Plant, PlantConfig  # noqa: PLC0415
+    from hyst_sim.scenario import scenario_dir  # noqa: PLC0415
+
+    from .loop import SimPlant  # noqa: PLC0415
+
+    path = Path(scenario)
+    if not path.exists():
+        named = scenario_dir() / (scenario if scenario.endswith(".yaml") else scenario + ".yaml")
+        if not named.exists():
+            shipped = ", ".join(sorted(p.stem for p in scenario_dir().glob("*.yaml")))
+            raise ConfigError(f"--scenario {scenario}: no such file, nor a shipped scenario ({shipped})")
+        path = named
+    try:
+        cfg = PlantConfig.from_scenario(path, base=PlantConfig.for_profile("pea", rate=rate, seed=seed))
+    except (SimError, ValueError) as err:
+        raise ConfigError(f"--scenario {scenario}: {err}") from err
+    return SimPlant(Plant(cfg))
+
+
 def run(args: argparse.Namespace) -> int:
     from hyst_model.core import pea_default  # noqa: PLC0415
     from .dmrac import DMRACGains  # noqa: PLC0415
@@ -73,15 +143,28 @@ def run(args: argparse.Namespace) -> int:
 
     if not (math.isfinite(args.seconds) and 0 < args.seconds <= 600):
         raise ConfigError("--seconds must be in (0, 600]")
+    if args.rate is None:
+        args.rate = _params_rate(args.params) if args.params else 2000.0
     if not (math.isfinite(args.rate) and 10 <= args.rate <= 20000):
         raise ConfigError("--rate must be in [10, 20000] Hz")
     ref = parse_reference(args.reference)
-    model = mismatched(pea_default(), args.mismatch) if args.mismatch else pea_default()
+    comp = None
+    if args.params:
+        model, comp = _params_model(args.params, args.rate, args.no_effects)
+    else:
+        model = pea_default()
+    model = mismatched(model, args.mismatch) if args.mismatch else model
     gains = _gains(args, {"dppc": DPPCGains, "dmrac": DMRACGains, "pid": PIDGains})
-    ctrl = make_controller(args.algorithm, model, 1.0 / args.rate, gains=gains, initial=args.initial)
-    res = run_closed_loop(ctrl, ref, args.seconds, plant=default_plant(rate=args.rate, seed=args.seed))
+    ctrl = make_controller(args.algorithm, model, 1.0 / args.rate, gains=gains, initial=args.initial,
+                           compensation=comp)
+    plant = _plant(args.scenario, args.rate, args.seed) if args.scenario else default_plant(args.rate, args.seed)
+    res = run_closed_loop(ctrl, ref, args.seconds, plant=plant)
     out = res.summary()
-    out.update(reference=args.reference, mismatch=args.mismatch, units="m, V")
+    out.update(reference=args.reference, mismatch=args.mismatch, units="m, V", params=args.params,
+               scenario=args.scenario, compensated=comp.names if comp else [],
+               not_compensated=dict(comp.unused) if comp else {})
+    if comp is not None and comp.unused and not args.json:
+        print(f"note: {comp.describe()}", file=sys.stderr)
     if args.json:
         json.dump(out, sys.stdout)
         sys.stdout.write("\n")

@@ -39,3 +39,36 @@ def test_bad_input_is_one_line_and_exit_2(argv, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("hyst track: error:") and "Traceback" not in "".join(err)
+
+
+def _params(tmp_path, effects: str = "") -> str:
+    """The embedded stage's model at 2 kHz as a params file, with an identified 3-sample input delay."""
+    from hyst_model.core import pea_default
+
+    m = pea_default()
+    body = "".join(f"      {k}: {v!r}\n" for k, v in m.to_dict().items())
+    p = tmp_path / "stage.yaml"
+    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n" + effects + body +
+                 f"      u_scale: {m.u_scale!r}\n      y_scale: {m.y_scale!r}\n      dt: 0.0005\n"
+                 "      delay:\n        tau: 0.0015\n        side: input\n")
+    return str(p)
+
+
+def test_track_with_the_identified_model_against_a_hidden_scenario(capsys, tmp_path):
+    """--params P --scenario S: the delay of P is compensated on the hidden-delay stage; --no-effects is not."""
+    p = _params(tmp_path, "      effects: [delay]\n")
+    res = {}
+    for extra in ([], ["--no-effects"]):
+        assert main(["track", "--params", p, "--scenario", "hidden_delay", "--reference", "sine:5", "--seconds",
+                     "0.5", "--json", *extra]) == 0
+        res[bool(extra)] = json.loads(capsys.readouterr().out)
+    assert res[False]["compensated"] == ["delay"] and res[True]["compensated"] == []
+    assert res[False]["rmse"] < 20e-9 < 10 * res[False]["rmse"] < res[True]["rmse"]
+
+
+@pytest.mark.parametrize("extra", [["--scenario", "nope"], ["--rate", "1000"], ["--params", "/nope.yaml"]])
+def test_track_params_and_scenario_errors_are_one_line(extra, capsys, tmp_path):
+    argv = ["track", "--params", _params(tmp_path), *extra]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "error" in err[0]
