@@ -233,7 +233,7 @@ class ControllerNode(Node):
         gains = {a: cls(**{n: get(f"{a}.{n}") for n in spec}) for a, (cls, spec) in _GAINS.items()}
         model = check_model(MBWParams(**{k: _F(get(f"model.{k}")) for k in _MODEL_KEYS}))  # whatever runs now
         try:
-            effects = tuple(str(e) for e in (get("model.effects") or ()))
+            effects = tuple(str(e) for e in (get("model.effects") or ()) if str(e))  # [""] = none (ROS types lists)
         except ParameterUninitializedException:
             effects = ()
         named = {e.split(".")[0] for e in self._effect_keys}

@@ -182,3 +182,23 @@ def test_a_second_command_publisher_is_reported(harness):
     vals = {kv.key: kv.value for s in got["diag"][-1].status for kv in s.values}
     assert vals["other_command_publishers"] == "1"
     peer.destroy_publisher(rival)
+
+
+def test_a_pushed_model_with_effects_is_compensated_and_a_plain_push_clears_them(harness):
+    """What hyst_ident_node pushes (controller_parameters) for mbw + creep is taken whole; then a plain MBW."""
+    from hyst_model.core import pea_default
+    from hyst_model.effects import compose
+    from hyst_model.ident_node import controller_parameters
+    from hyst_model.models import BASE_MODELS
+
+    node, peer, ex, pub, got = harness("-p", "rate:=2000.0")
+    cfg = {"u_scale": 15.0, "y_scale": 5.42e-6, "dt": 5e-4}
+    m = compose(BASE_MODELS["mbw"](cfg), ["creep"], cfg)
+    theta = m.pack({**pea_default().to_dict(), "creep.gain": 0.012, "creep.tilt": 0.0})
+    r = node.set_parameters_atomically(controller_parameters(m, theta, 5e-4))
+    assert r.successful, r.reason
+    assert node._compensating == ["creep"] and node._unused == ""  # noqa: SLF001
+    plain = BASE_MODELS["mbw"](cfg)
+    r = node.set_parameters_atomically(controller_parameters(plain, plain.pack(pea_default().to_dict()), 5e-4))
+    assert r.successful, r.reason
+    assert node._compensating == [] and node._settings.effects == ()  # noqa: SLF001

@@ -110,23 +110,36 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
 
 
 def controller_parameters(model, theta, dt: float) -> list[Parameter]:
-    """``model.*`` parameters the controller node declares (MBW only; BW is MBW with zero rate terms).
+    """``model.*`` parameters the controller node declares: the MBW (BW is MBW with zero rate terms), the scales,
+    ``model.dt`` and, for a model with effects, ``model.effects`` with every effect parameter and configuration key
+    (the controller compensates those it can invert and reports the rest).
 
     Every one is pushed, ``model.dt`` and the scales included, so the controller can refuse a model identified
     at another sample rate (the MBW recursion is per sample) instead of silently running it at its own rate.
     """
     base = getattr(model, "base", model)
-    if getattr(model, "effects", None):
-        raise HystError("the controller takes a plain MBW/BW model, not base + effects")
     if base.name not in ("mbw", "bw"):
         raise HystError(f"the controller inverts MBW; a {base.name!r} model cannot be pushed")
+    effects = [e.name for e in getattr(model, "effects", [])]
+    if base.name == "bw" and effects:
+        raise HystError("the controller inverts MBW: a bw model with effects cannot be pushed (refit with mbw)")
     values = dict(zip(PARAM_NAMES, (0.0,) * 8))
     values.update(model.unpack(theta))
-    values.update({k: float(v) for k, v in model.config().items() if k in ("u_scale", "y_scale")})
+    cfg = model.config()
+    values.update({k: float(v) for k, v in cfg.items() if k in ("u_scale", "y_scale")})
     out = [Parameter("model.base", Parameter.Type.STRING, "mbw")]
     out += [Parameter(f"model.{k}", Parameter.Type.DOUBLE, float(values[k]))
             for k in PARAM_NAMES + ("offset", "u_scale", "y_scale")]
     out.append(Parameter("model.dt", Parameter.Type.DOUBLE, float(dt)))
+    out.append(Parameter("model.effects", Parameter.Type.STRING_ARRAY, effects or [""]))
+    for e in getattr(model, "effects", []):
+        if not type(e).__module__.startswith("hyst_model.effects."):
+            continue  # a user effect: the controller does not declare its keys, it names the effect as unused
+        for p in e.params():
+            out.append(Parameter(f"model.{e.name}.{p.name}", Parameter.Type.DOUBLE, float(values[f"{e.name}.{p.name}"])))
+        for k, v in e.config().items():
+            kind = Parameter.Type.STRING if isinstance(v, str) else Parameter.Type.DOUBLE
+            out.append(Parameter(f"model.{e.name}.{k}", kind, v if isinstance(v, str) else float(v)))
     return out
 
 

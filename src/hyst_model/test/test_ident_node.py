@@ -35,6 +35,7 @@ class FakeController(Node):
     def __init__(self, context):
         super().__init__("fake_ctrl", context=context)
         self.declare_parameter("model.base", "mbw")
+        self.declare_parameter("model.effects", Parameter.Type.STRING_ARRAY)
         for k in KEYS + ("dt",):
             self.declare_parameter(f"model.{k}", 0.0)
         self.add_on_set_parameters_callback(self._on_set)
