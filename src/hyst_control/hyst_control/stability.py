@@ -174,12 +174,25 @@ def controller_tf(algorithm: str, gains, model: MBWParams, dt: float) -> tuple[n
     if algorithm == "pid":
         g = gains or PIDGains()
         a = dt / (g.t_filter + dt)
-        filt = np.array([1.0, -(1.0 - a)])
-        integ = np.array([1.0, -1.0])
-        num = (-g.kp * np.polymul(integ, filt) - np.pad(g.ki * dt * filt, (0, 1))
-               - a * g.kd / dt * np.polymul(integ, integ))
-        return num, np.polymul(integ, filt)
+        # Sum of the terms over a common denominator; a term that is off brings no factor (a cancelled pole on
+        # the unit circle would read as instability).
+        num, den = np.array([-g.kp]), np.array([1.0])
+        if g.ki > 0.0:  # − K_i·Δt/(1 − q)
+            den = np.array([1.0, -1.0])
+            num = _add(np.polymul(num, den), [-g.ki * dt])
+        if g.kd > 0.0:  # − a·K_d/Δt·(1 − q)/(1 − (1 − a)q)
+            filt = np.array([1.0, -(1.0 - a)])
+            num = _add(np.polymul(num, filt), np.polymul(-a * g.kd / dt * np.array([1.0, -1.0]), den))
+            den = np.polymul(den, filt)
+        return num, den
     raise ConfigError(f"no linearisation for algorithm {algorithm!r}")
+
+
+def _add(a, b) -> np.ndarray:
+    """Sum of two coefficient arrays in q (index = power of q)."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    n = max(a.size, b.size)
+    return np.pad(a, (0, n - a.size)) + np.pad(b, (0, n - b.size))
 
 
 def _char(cn, cd, pn, pd, gamma: float) -> np.ndarray:
