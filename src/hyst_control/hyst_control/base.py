@@ -232,12 +232,28 @@ class ModelBased(BaseController):
         self.set_model(model)
 
     def set_model(self, model: MBWParams) -> None:
-        """Swap the model at run time (the identification node pushes new ``model.*``); memory is kept."""
-        self.model = check_model(model)
+        """Swap the model at run time (the identification node pushes new ``model.*``); memory is kept.
+
+        Memory held in model units is re-expressed in the new model's scaling first (:meth:`_rescale`): every fit
+        picks its own ``y_scale``/``u_scale``, and a state left in the old units is a step in the command.
+        """
+        model = check_model(model)
+        old = getattr(self, "model", None)
+        if old is not None:
+            self._rescale(old, model)
+        self.model = model
         self._p = np.ascontiguousarray(model.vector)
         self._us = model.u_scale
         self._ys = model.y_scale
         self._off = model.offset
+
+    def _rescale(self, old: MBWParams, new: MBWParams) -> None:
+        """Re-express the law's model-unit memory from ``old``'s scaling in ``new``'s (overridden by the laws)."""
+
+    @staticmethod
+    def _pos(y_m: float, old: MBWParams, new: MBWParams) -> float:
+        """A position in ``old``'s model units, in ``new``'s (through SI: offset and scale)."""
+        return (y_m * old.y_scale + old.offset - new.offset) / new.y_scale
 
     def _ym(self, y: float) -> float:
         return (y - self._off) / self._ys

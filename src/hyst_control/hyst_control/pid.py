@@ -132,6 +132,10 @@ class OpenLoop(ModelBased):
     def sync_applied(self, u_applied: float) -> None:
         """Open loop follows its own model, not the measured side: nothing to synchronise."""
 
+    def _rescale(self, old: MBWParams, new: MBWParams) -> None:
+        """The model's predicted position, in the new model units (the same metres)."""
+        self._ym_state = self._pos(self._ym_state, old, new)
+
     def _on_reset(self, y0: float, u0: float, r0: float) -> None:
         self._ym_state = self._ym(y0)
         self._uff = u0
