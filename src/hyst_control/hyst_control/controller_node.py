@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -40,6 +41,7 @@ from .limits import GMA_LIMITS, PEA_LIMITS, CommandLimits
 from .loop import ALGORITHMS, make_controller
 from .pid import PIDGains
 from .reference import Reference, parse_reference
+from .stability import POLICIES, Resonance, StabilityVerdict, guard
 
 __all__ = ["ControllerNode", "ControllerSettings", "main"]
 
@@ -74,6 +76,8 @@ _GAINS = {
         "t_track": (5e-3, 1e-6, 10.0, "anti-windup back-calculation time constant (s)")}),
 }
 _MODEL_KEYS = PARAM_NAMES + ("offset", "u_scale", "y_scale")
+# The check is a few tens of ms; the on-set callback and the post-set callback both build the settings.
+_guard = lru_cache(maxsize=64)(guard)
 
 
 @dataclass(frozen=True)
@@ -91,8 +95,13 @@ class ControllerSettings:
     pid: PIDGains
     model: MBWParams
     reference: Reference | None = None
+    stability: StabilityVerdict | None = None
 
     def gains(self, algorithm: str):
+        """The gains that run: derated by the stability check when the resonance demands it."""
+        st = self.stability
+        if st is not None and st.algorithm == algorithm:
+            return st.gains
         return getattr(self, algorithm) if algorithm in _GAINS else None
 
 
@@ -119,6 +128,7 @@ class ControllerNode(Node):
         self._unused = self._unused_model_terms()
         if self._unused:
             self.get_logger().warning(self._unused)
+        self._log_stability(None, self._settings.stability)
         self.scheduling = set_realtime(int(self.get_parameter("rt_priority").value))
         if self.get_parameter("rt_priority").value and self.scheduling.policy != "fifo":
             self.get_logger().warning(f"{self.scheduling.note}; running with normal scheduling")
@@ -178,6 +188,17 @@ class ControllerNode(Node):
                     ParameterDescriptor(description=txt, floating_point_range=_fp(lo, hi))
                 d(f"{alg}.{name}", default, desc)
         d("dmrac.initial", "model", ParameterDescriptor(description="initial estimates: model | cs0..cs3 (Table 5.3)"))
+        d("stability.policy", "derate", ParameterDescriptor(
+            description="gains unstable against model.dynamics (the stage resonance): derate (run the least-derated "
+                        "robust gains, WARN) | warn (run them anyway, WARN) | refuse (reject, exit 2 at start)"))
+        d("stability.gain_margin", 2.0, ParameterDescriptor(
+            description="gain margin (factor, both ways) the loop with the resonance must keep",
+            floating_point_range=_fp(1.0, 10.0)))
+        d("model.dynamics.fn", 0.0, ParameterDescriptor(
+            description="identified stage resonance (dynamics effect) fn (Hz); 0 = none; the gains are checked "
+                        "against it (hyst_control.stability)", floating_point_range=_fp(0.0, 1e6)))
+        d("model.dynamics.zeta", 0.05, ParameterDescriptor(
+            description="damping ratio of that resonance", floating_point_range=_fp(1e-4, 10.0)))
         m = _profile_model(self.get_parameter("profile").value)
         d("model.base", "mbw", ParameterDescriptor(description="base model of the params file (controllers need mbw)"))
         d("model.effects", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
@@ -210,12 +231,19 @@ class ControllerNode(Node):
             raise ControlError("dmrac.initial must be model, cs0, cs1, cs2 or cs3")
         gains = {a: cls(**{n: get(f"{a}.{n}") for n in spec}) for a, (cls, spec) in _GAINS.items()}
         model = check_model(MBWParams(**{k: _F(get(f"model.{k}")) for k in _MODEL_KEYS}))  # whatever runs now
+        policy, fn = str(get("stability.policy")), _F(get("model.dynamics.fn"))
+        if policy not in POLICIES:
+            raise ControlError(f"stability.policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+        res = Resonance(fn, _F(get("model.dynamics.zeta"))) if fn > 0 else None
+        stab = _guard(alg, gains.get(alg), model, 1.0 / rate, res, policy, _F(get("stability.gain_margin")),
+                      (_F(get("v_min")), _F(get("v_max"))))  # StabilityError (a ControlError) = rejected
         s = ControllerSettings(
             algorithm=alg, rate=_F(get("rate")),
             limits=CommandLimits(_F(get("v_min")), _F(get("v_max")), _F(get("slew_max")), _F(get("v_safe"))),
             watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
             dmrac_initial=init, model=model,
-            reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, **gains)
+            reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, stability=stab,
+            **gains)
         make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init)  # checks the model too
         return s
 
@@ -229,6 +257,7 @@ class ControllerNode(Node):
     def _after_set(self, params) -> None:
         old, new = self._settings, self._read()
         self._settings = new
+        self._log_stability(old.stability, new.stability)
         if any(p.name == "model.effects" for p in params):
             unused = self._unused_model_terms()
             if unused and unused != self._unused:
@@ -255,6 +284,15 @@ class ControllerNode(Node):
         self._n["switches"] += 1
         self._skip = int(0.25 * s.rate)
         self.get_logger().info(f"switched to {s.algorithm} (bumpless)")
+
+    def _log_stability(self, old: StabilityVerdict | None, new: StabilityVerdict | None) -> None:
+        """One log line when the verdict of the resonance check changes (start, model push, gains, switch)."""
+        if new is None or not new.message or (old is not None and old.message == new.message):
+            return
+        if new.warn:  # two call sites: rclpy's logger refuses a second severity at one site
+            self.get_logger().warning(new.message)
+        else:
+            self.get_logger().info(new.message)
 
     # Messages -------------------------------------------------------------------------------------------
     def _on_reference(self, msg: JointState) -> None:
@@ -364,6 +402,10 @@ class ControllerNode(Node):
         if self._unused:  # whatever else is going on, the dropped model terms stay visible
             st.level = max(st.level, DiagnosticStatus.WARN)
             st.message += f"; {self._unused}"
+        stab = self._settings.stability
+        if stab is not None and stab.warn:  # derated (or running unstable gains under policy warn)
+            st.level = max(st.level, DiagnosticStatus.WARN)
+            st.message += f"; {stab.message}"
         others = self._other_commanders()
         if others:  # two sources of /stage/command: the stage follows whichever wrote last
             st.level = max(st.level, DiagnosticStatus.WARN)
@@ -372,6 +414,10 @@ class ControllerNode(Node):
         vals = dict(self._n, algorithm=self._settings.algorithm, other_command_publishers=others)
         if self._unused:
             vals["unused_model_terms"] = self._unused
+        if stab is not None and stab.running is not None:
+            vals.update(stability=stab.message, spectral_radius=f"{stab.running.spectral_radius:.4f}",
+                        gain_margin=f"{stab.running.gain_margin_up:.3g}",
+                        derated=", ".join(f"{n}={b:.6g}" for n, _, b in stab.derated))
         if self._ctrl is not None:
             vals.update(saturated=int(self._ctrl.state().get("saturated", 0)))
         for a, m in self.tracking_summary().items():
