@@ -154,6 +154,7 @@ class BaseController:
         self._y_prev = math.nan
         self._r_aim = math.nan   # the reference the newest measurement was aimed at (r passed one step earlier)
         self._k = 0
+        self._du = 0.0  # last command increment u_{k−1} − u_{k−2} (V): the rate a successor continues from
         self._bad_inputs = 0
         self._saturated = 0
 
@@ -167,6 +168,7 @@ class BaseController:
         r0 = y0 if r0 is None or not math.isfinite(r0) else float(r0)
         self._u_prev, self._r_prev, self._y_prev, self._k = u0, r0, y0, 0
         self._r_aim = r0
+        self._du = 0.0
         self._on_reset(y0, u0, r0)
 
     def step(self, r_k: float, y_k: float) -> float:
@@ -184,6 +186,7 @@ class BaseController:
         if u != raw:
             self._saturated += 1
         self._commit(u)
+        self._du = u - self._u_prev
         self._r_aim = self._r_prev
         self._u_prev, self._r_prev, self._y_prev = u, r_k, y_k
         self._k += 1
@@ -209,6 +212,11 @@ class BaseController:
     @property
     def last_command(self) -> float:
         return self._u_prev
+
+    @property
+    def last_increment(self) -> float:
+        """u_{k−1} − u_{k−2} (V): how fast the command was moving when this controller last ran."""
+        return self._du
 
     @property
     def last_reference(self) -> float:
@@ -267,7 +275,9 @@ def hand_over(new: BaseController, old: BaseController | None, y: float, r: floa
     if old is not None and math.isfinite(old.last_command):
         u0 = old.last_command
         r0 = old.last_reference if math.isfinite(old.last_reference) else r
+        du = old.last_increment
     else:
-        u0, r0 = new.limits.v_safe, r
+        u0, r0, du = new.limits.v_safe, r, 0.0
     new.reset(y, u0, r0)
+    new._du = du  # noqa: SLF001 - the command's rate in force, for laws that fade a start-up bump (OpenLoop)
     return new
