@@ -3,6 +3,7 @@
 Example::
 
     hyst track --algorithm dppc --reference sine:10 --seconds 2 --rate 2000 --json
+    hyst track --algorithm pid --resonance 350:0.04          # a stage resonance; gains checked and derated
 """
 from __future__ import annotations
 
@@ -38,6 +39,12 @@ def register(subparsers) -> None:
     p.add_argument("--gain", action="append", default=[], metavar="NAME=VALUE",
                    help="set one gain of the algorithm (repeatable), e.g. --gain kappa1=0.5 --gain a_m=0.3; names "
                         "as the controller node's <algorithm>.<name> parameters")
+    p.add_argument("--resonance", default="", metavar="FN[:ZETA]",
+                   help="give the simulated stage a resonance after the hysteresis (Hz, damping ratio, default "
+                        "0.05) and tell the controller, as an identified dynamics effect would: its gains are "
+                        "checked against it (hyst_control.stability)")
+    p.add_argument("--stability", choices=("derate", "warn", "refuse"), default="derate",
+                   help="gains unstable against --resonance: derate them (default), warn and run them, or refuse")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -65,11 +72,35 @@ def _gains(args: argparse.Namespace, classes: dict):
     return cls(**kw) if kw else None
 
 
+def _resonance(text: str) -> tuple[float, float]:
+    fn, _, zeta = text.partition(":")
+    try:
+        fn_v, zeta_v = float(fn), float(zeta) if zeta else 0.05
+    except ValueError:
+        raise ConfigError(f"--resonance {text!r}: use FN[:ZETA], e.g. 350:0.04") from None
+    if not (1.0 <= fn_v <= 20000.0 and 0.001 <= zeta_v <= 2.0):
+        raise ConfigError("--resonance needs 1 <= FN <= 20000 Hz and 0.001 <= ZETA <= 2")
+    return fn_v, zeta_v
+
+
+def _resonant(rate: float, seed: int, fn: float, zeta: float):
+    """The default simulated stage with a ZOH-exact resonance after the hysteresis (hyst_sim's dynamics effect)."""
+    from hyst_sim.plant import Plant, PlantConfig  # noqa: PLC0415 - sibling package, numerical core
+    from hyst_sim.truth_effects import Dynamics  # noqa: PLC0415
+
+    from .loop import SimPlant  # noqa: PLC0415
+
+    cfg = PlantConfig.for_profile("pea", rate, seed=seed)
+    return SimPlant(Plant(cfg.replace(effects=cfg.effects.with_effects(dynamics=Dynamics(strength=fn,
+                                                                                          damping=zeta)))))
+
+
 def run(args: argparse.Namespace) -> int:
     from hyst_model.core import pea_default  # noqa: PLC0415
     from .dmrac import DMRACGains  # noqa: PLC0415
     from .dppc import DPPCGains  # noqa: PLC0415
     from .pid import PIDGains  # noqa: PLC0415
+    from .stability import Resonance, guard  # noqa: PLC0415
 
     if not (math.isfinite(args.seconds) and 0 < args.seconds <= 600):
         raise ConfigError("--seconds must be in (0, 600]")
@@ -78,9 +109,23 @@ def run(args: argparse.Namespace) -> int:
     ref = parse_reference(args.reference)
     model = mismatched(pea_default(), args.mismatch) if args.mismatch else pea_default()
     gains = _gains(args, {"dppc": DPPCGains, "dmrac": DMRACGains, "pid": PIDGains})
+    plant = default_plant(rate=args.rate, seed=args.seed)
+    stab = None
+    if args.resonance:
+        fn, zeta = _resonance(args.resonance)
+        plant = _resonant(args.rate, args.seed, fn, zeta)
+        stab = guard(args.algorithm, gains if gains is not None or args.algorithm == "open_loop" else
+                     make_controller(args.algorithm, model, 1.0 / args.rate).gains, model, 1.0 / args.rate,
+                     Resonance(fn, zeta), args.stability)
+        gains = stab.gains
+        if stab.warn:
+            print(f"hyst track: warning: {stab.message}", file=sys.stderr)
     ctrl = make_controller(args.algorithm, model, 1.0 / args.rate, gains=gains, initial=args.initial)
-    res = run_closed_loop(ctrl, ref, args.seconds, plant=default_plant(rate=args.rate, seed=args.seed))
+    res = run_closed_loop(ctrl, ref, args.seconds, plant=plant)
     out = res.summary()
+    if stab is not None and stab.running is not None:
+        out.update(stability=stab.message, spectral_radius=stab.running.spectral_radius,
+                   derated={n: b for n, _, b in stab.derated})
     out.update(reference=args.reference, mismatch=args.mismatch, units="m, V")
     if args.json:
         json.dump(out, sys.stdout)
