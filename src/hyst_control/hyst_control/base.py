@@ -154,6 +154,7 @@ class BaseController:
         self._y_prev = math.nan
         self._r_aim = math.nan   # the reference the newest measurement was aimed at (r passed one step earlier)
         self._k = 0
+        self._du = 0.0  # last command increment u_{k−1} − u_{k−2} (V): the rate a successor continues from
         self._bad_inputs = 0
         self._saturated = 0
 
@@ -167,6 +168,7 @@ class BaseController:
         r0 = y0 if r0 is None or not math.isfinite(r0) else float(r0)
         self._u_prev, self._r_prev, self._y_prev, self._k = u0, r0, y0, 0
         self._r_aim = r0
+        self._du = 0.0
         self._on_reset(y0, u0, r0)
 
     def step(self, r_k: float, y_k: float) -> float:
@@ -184,6 +186,7 @@ class BaseController:
         if u != raw:
             self._saturated += 1
         self._commit(u)
+        self._du = u - self._u_prev
         self._r_aim = self._r_prev
         self._u_prev, self._r_prev, self._y_prev = u, r_k, y_k
         self._k += 1
@@ -211,6 +214,11 @@ class BaseController:
         return self._u_prev
 
     @property
+    def last_increment(self) -> float:
+        """u_{k−1} − u_{k−2} (V): how fast the command was moving when this controller last ran."""
+        return self._du
+
+    @property
     def last_reference(self) -> float:
         return self._r_prev
 
@@ -232,12 +240,28 @@ class ModelBased(BaseController):
         self.set_model(model)
 
     def set_model(self, model: MBWParams) -> None:
-        """Swap the model at run time (the identification node pushes new ``model.*``); memory is kept."""
-        self.model = check_model(model)
+        """Swap the model at run time (the identification node pushes new ``model.*``); memory is kept.
+
+        Memory held in model units is re-expressed in the new model's scaling first (:meth:`_rescale`): every fit
+        picks its own ``y_scale``/``u_scale``, and a state left in the old units is a step in the command.
+        """
+        model = check_model(model)
+        old = getattr(self, "model", None)
+        if old is not None:
+            self._rescale(old, model)
+        self.model = model
         self._p = np.ascontiguousarray(model.vector)
         self._us = model.u_scale
         self._ys = model.y_scale
         self._off = model.offset
+
+    def _rescale(self, old: MBWParams, new: MBWParams) -> None:
+        """Re-express the law's model-unit memory from ``old``'s scaling in ``new``'s (overridden by the laws)."""
+
+    @staticmethod
+    def _pos(y_m: float, old: MBWParams, new: MBWParams) -> float:
+        """A position in ``old``'s model units, in ``new``'s (through SI: offset and scale)."""
+        return (y_m * old.y_scale + old.offset - new.offset) / new.y_scale
 
     def _ym(self, y: float) -> float:
         return (y - self._off) / self._ys
@@ -251,7 +275,9 @@ def hand_over(new: BaseController, old: BaseController | None, y: float, r: floa
     if old is not None and math.isfinite(old.last_command):
         u0 = old.last_command
         r0 = old.last_reference if math.isfinite(old.last_reference) else r
+        du = old.last_increment
     else:
-        u0, r0 = new.limits.v_safe, r
+        u0, r0, du = new.limits.v_safe, r, 0.0
     new.reset(y, u0, r0)
+    new._du = du  # noqa: SLF001 - the command's rate in force, for laws that fade a start-up bump (OpenLoop)
     return new

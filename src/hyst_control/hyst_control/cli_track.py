@@ -3,6 +3,7 @@
 Example::
 
     hyst track --algorithm dppc --reference sine:10 --seconds 2 --rate 2000 --json
+    hyst track --algorithm pid --resonance 350:0.04          # a stage resonance; gains checked and derated
     hyst track --params stage.yaml --scenario hidden_creep --reference c1     # the identified model, compensated
 
 ``--params`` runs the controller with the model of a params file — its base MBW and, unless ``--no-effects``, its
@@ -44,6 +45,12 @@ def register(subparsers) -> None:
     p.add_argument("--gain", action="append", default=[], metavar="NAME=VALUE",
                    help="set one gain of the algorithm (repeatable), e.g. --gain kappa1=0.5 --gain a_m=0.3; names "
                         "as the controller node's <algorithm>.<name> parameters")
+    p.add_argument("--resonance", default="", metavar="FN[:ZETA]",
+                   help="give the simulated stage a resonance after the hysteresis (Hz, damping ratio, default "
+                        "0.05) and tell the controller, as an identified dynamics effect would: its gains are "
+                        "checked against it (hyst_control.stability)")
+    p.add_argument("--stability", choices=("derate", "warn", "refuse"), default="derate",
+                   help="gains unstable against --resonance: derate them (default), warn and run them, or refuse")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     p.add_argument("--params", default=None, metavar="P.yaml",
                    help="controller model from this params file (hyst fit / hyst diagnose --out); default: the "
@@ -111,6 +118,17 @@ def _params_model(path: str, rate: float, no_effects: bool):
     return model, comp if comp.used or comp.unused else Compensation()
 
 
+def _params_resonance(path: str):
+    """The identified resonance (``dynamics.fn``, ``dynamics.zeta``) of a params file, or None."""
+    from hyst_model.io.params_file import read_params  # noqa: PLC0415
+
+    from .stability import Resonance  # noqa: PLC0415
+
+    v = read_params(path).values
+    fn, zeta = v.get("dynamics.fn"), v.get("dynamics.zeta")
+    return Resonance(float(fn), float(zeta)) if fn and zeta else None
+
+
 def _plant(scenario: str, rate: float, seed: int):
     """The embedded stage with a hidden-effect scenario (a file, or a name shipped with hyst_sim)."""
     from pathlib import Path  # noqa: PLC0415
@@ -135,11 +153,35 @@ def _plant(scenario: str, rate: float, seed: int):
     return SimPlant(Plant(cfg))
 
 
+def _resonance(text: str) -> tuple[float, float]:
+    fn, _, zeta = text.partition(":")
+    try:
+        fn_v, zeta_v = float(fn), float(zeta) if zeta else 0.05
+    except ValueError:
+        raise ConfigError(f"--resonance {text!r}: use FN[:ZETA], e.g. 350:0.04") from None
+    if not (1.0 <= fn_v <= 20000.0 and 0.001 <= zeta_v <= 2.0):
+        raise ConfigError("--resonance needs 1 <= FN <= 20000 Hz and 0.001 <= ZETA <= 2")
+    return fn_v, zeta_v
+
+
+def _resonant(rate: float, seed: int, fn: float, zeta: float):
+    """The default simulated stage with a ZOH-exact resonance after the hysteresis (hyst_sim's dynamics effect)."""
+    from hyst_sim.plant import Plant, PlantConfig  # noqa: PLC0415 - sibling package, numerical core
+    from hyst_sim.truth_effects import Dynamics  # noqa: PLC0415
+
+    from .loop import SimPlant  # noqa: PLC0415
+
+    cfg = PlantConfig.for_profile("pea", rate, seed=seed)
+    return SimPlant(Plant(cfg.replace(effects=cfg.effects.with_effects(dynamics=Dynamics(strength=fn,
+                                                                                          damping=zeta)))))
+
+
 def run(args: argparse.Namespace) -> int:
     from hyst_model.core import pea_default  # noqa: PLC0415
     from .dmrac import DMRACGains  # noqa: PLC0415
     from .dppc import DPPCGains  # noqa: PLC0415
     from .pid import PIDGains  # noqa: PLC0415
+    from .stability import Resonance, guard  # noqa: PLC0415
 
     if not (math.isfinite(args.seconds) and 0 < args.seconds <= 600):
         raise ConfigError("--seconds must be in (0, 600]")
@@ -155,11 +197,29 @@ def run(args: argparse.Namespace) -> int:
         model = pea_default()
     model = mismatched(model, args.mismatch) if args.mismatch else model
     gains = _gains(args, {"dppc": DPPCGains, "dmrac": DMRACGains, "pid": PIDGains})
+    plant = _plant(args.scenario, args.rate, args.seed) if args.scenario else default_plant(args.rate, args.seed)
+    stab = None
+    resonance = None
+    if args.resonance:
+        fn, zeta = _resonance(args.resonance)
+        plant = _resonant(args.rate, args.seed, fn, zeta)
+        resonance = Resonance(fn, zeta)
+    elif comp is not None and "dynamics" in comp.unused and args.params:
+        resonance = _params_resonance(args.params)  # an identified resonance: the gains are checked against it
+    if resonance is not None:
+        stab = guard(args.algorithm, gains if gains is not None or args.algorithm == "open_loop" else
+                     make_controller(args.algorithm, model, 1.0 / args.rate).gains, model, 1.0 / args.rate,
+                     resonance, args.stability)
+        gains = stab.gains
+        if stab.warn:
+            print(f"hyst track: warning: {stab.message}", file=sys.stderr)
     ctrl = make_controller(args.algorithm, model, 1.0 / args.rate, gains=gains, initial=args.initial,
                            compensation=comp)
-    plant = _plant(args.scenario, args.rate, args.seed) if args.scenario else default_plant(args.rate, args.seed)
     res = run_closed_loop(ctrl, ref, args.seconds, plant=plant)
     out = res.summary()
+    if stab is not None and stab.running is not None:
+        out.update(stability=stab.message, spectral_radius=stab.running.spectral_radius,
+                   derated={n: b for n, _, b in stab.derated})
     out.update(reference=args.reference, mismatch=args.mismatch, units="m, V", params=args.params,
                scenario=args.scenario, compensated=comp.names if comp else [],
                not_compensated=dict(comp.unused) if comp else {})

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -41,6 +42,7 @@ from .limits import GMA_LIMITS, PEA_LIMITS, CommandLimits
 from .loop import ALGORITHMS, make_controller
 from .pid import PIDGains
 from .reference import Reference, parse_reference
+from .stability import POLICIES, Resonance, StabilityVerdict, guard
 
 __all__ = ["ControllerNode", "ControllerSettings", "main"]
 
@@ -75,6 +77,8 @@ _GAINS = {
         "t_track": (5e-3, 1e-6, 10.0, "anti-windup back-calculation time constant (s)")}),
 }
 _MODEL_KEYS = PARAM_NAMES + ("offset", "u_scale", "y_scale")
+# The check is a few tens of ms; the on-set callback and the post-set callback both build the settings.
+_guard = lru_cache(maxsize=64)(guard)
 
 
 @dataclass(frozen=True)
@@ -95,6 +99,7 @@ class ControllerSettings:
     #: The params file's effects (innermost first) and their parameters/configuration, dotted (``creep.gain``).
     effects: tuple = ()
     effect_values: tuple = ()
+    stability: StabilityVerdict | None = None
 
     def compensation(self) -> Compensation:
         """A fresh compensation (its effects keep per-run state) for the model's effects."""
@@ -102,6 +107,10 @@ class ControllerSettings:
         return plan_compensation(self.model, self.effects, vals, vals, 1.0 / self.rate)
 
     def gains(self, algorithm: str):
+        """The gains that run: derated by the stability check when the resonance demands it."""
+        st = self.stability
+        if st is not None and st.algorithm == algorithm:
+            return st.gains
         return getattr(self, algorithm) if algorithm in _GAINS else None
 
 
@@ -131,6 +140,7 @@ class ControllerNode(Node):
             self.get_logger().warning(self._unused)
         if self._compensating:
             self.get_logger().info("compensating the model's " + ", ".join(self._compensating))
+        self._log_stability(None, self._settings.stability)
         self.scheduling = set_realtime(int(self.get_parameter("rt_priority").value))
         if self.get_parameter("rt_priority").value and self.scheduling.policy != "fifo":
             self.get_logger().warning(f"{self.scheduling.note}; running with normal scheduling")
@@ -190,6 +200,12 @@ class ControllerNode(Node):
                     ParameterDescriptor(description=txt, floating_point_range=_fp(lo, hi))
                 d(f"{alg}.{name}", default, desc)
         d("dmrac.initial", "model", ParameterDescriptor(description="initial estimates: model | cs0..cs3 (Table 5.3)"))
+        d("stability.policy", "derate", ParameterDescriptor(
+            description="gains unstable against model.dynamics (the stage resonance): derate (run the least-derated "
+                        "robust gains, WARN) | warn (run them anyway, WARN) | refuse (reject, exit 2 at start)"))
+        d("stability.gain_margin", 2.0, ParameterDescriptor(
+            description="gain margin (factor, both ways) the loop with the resonance must keep",
+            floating_point_range=_fp(1.0, 10.0)))
         m = _profile_model(self.get_parameter("profile").value)
         d("model.base", "mbw", ParameterDescriptor(description="base model of the params file (controllers need mbw)"))
         d("model.effects", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
@@ -209,6 +225,8 @@ class ControllerNode(Node):
         # Every built-in effect's parameters at their identity values: a params file or a push may carry any.
         self._effect_keys = effect_parameters(1.0 / self.get_parameter("rate").value, m.u_scale, m.y_scale)
         for key, (default, txt) in self._effect_keys.items():
+            if key in ("dynamics.fn", "dynamics.zeta"):  # the resonance the stability check uses
+                txt += "; with dynamics in model.effects the gains are checked against it (hyst_control.stability)"
             desc = ParameterDescriptor(description=txt, floating_point_range=_fp(-1e6, 1e6)) \
                 if isinstance(default, float) else ParameterDescriptor(description=txt)
             d(f"model.{key}", default, desc)
@@ -239,12 +257,19 @@ class ControllerNode(Node):
         named = {e.split(".")[0] for e in self._effect_keys}
         evals = tuple((k, get(f"model.{k}")) for k in self._effect_keys if k.split(".")[0] in effects and
                       k.split(".")[0] in named)
+        policy = str(get("stability.policy"))
+        fn = _F(get("model.dynamics.fn")) if "dynamics" in effects else 0.0  # the identified resonance, if any
+        if policy not in POLICIES:
+            raise ControlError(f"stability.policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+        res = Resonance(fn, _F(get("model.dynamics.zeta"))) if fn > 0 else None
+        stab = _guard(alg, gains.get(alg), model, 1.0 / rate, res, policy, _F(get("stability.gain_margin")),
+                      (_F(get("v_min")), _F(get("v_max"))))  # StabilityError (a ControlError) = rejected
         s = ControllerSettings(
             algorithm=alg, rate=_F(get("rate")),
             limits=CommandLimits(_F(get("v_min")), _F(get("v_max")), _F(get("slew_max")), _F(get("v_safe"))),
             watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
             dmrac_initial=init, model=model,
-            reference=parse_reference(str(get("reference"))) if str(get("reference")) else None,
+            reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, stability=stab,
             effects=effects, effect_values=evals, **gains)
         make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init, s.compensation())  # checks all
         return s
@@ -259,6 +284,7 @@ class ControllerNode(Node):
     def _after_set(self, params) -> None:
         old, new = self._settings, self._read()
         self._settings = new
+        self._log_stability(old.stability, new.stability)
         if new.effects != old.effects or new.effect_values != old.effect_values:
             unused = self._unused_model_terms()
             if unused and unused != self._unused:
@@ -291,6 +317,15 @@ class ControllerNode(Node):
         self._n["switches"] += 1
         self._skip = int(0.25 * s.rate)
         self.get_logger().info(f"switched to {s.algorithm} (bumpless)")
+
+    def _log_stability(self, old: StabilityVerdict | None, new: StabilityVerdict | None) -> None:
+        """One log line when the verdict of the resonance check changes (start, model push, gains, switch)."""
+        if new is None or not new.message or (old is not None and old.message == new.message):
+            return
+        if new.warn:  # two call sites: rclpy's logger refuses a second severity at one site
+            self.get_logger().warning(new.message)
+        else:
+            self.get_logger().info(new.message)
 
     # Messages -------------------------------------------------------------------------------------------
     def _on_reference(self, msg: JointState) -> None:
@@ -403,6 +438,10 @@ class ControllerNode(Node):
         if self._unused:  # whatever else is going on, the dropped model terms stay visible
             st.level = max(st.level, DiagnosticStatus.WARN)
             st.message += f"; {self._unused}"
+        stab = self._settings.stability
+        if stab is not None and stab.warn:  # derated (or running unstable gains under policy warn)
+            st.level = max(st.level, DiagnosticStatus.WARN)
+            st.message += f"; {stab.message}"
         others = self._other_commanders()
         if others:  # two sources of /stage/command: the stage follows whichever wrote last
             st.level = max(st.level, DiagnosticStatus.WARN)
@@ -412,6 +451,10 @@ class ControllerNode(Node):
                     compensated=",".join(self._compensating))
         if self._unused:
             vals["unused_model_terms"] = self._unused
+        if stab is not None and stab.running is not None:
+            vals.update(stability=stab.message, spectral_radius=f"{stab.running.spectral_radius:.4f}",
+                        gain_margin=f"{stab.running.gain_margin_up:.3g}",
+                        derated=", ".join(f"{n}={b:.6g}" for n, _, b in stab.derated))
         if self._ctrl is not None:
             vals.update(saturated=int(self._ctrl.state().get("saturated", 0)))
         for a, m in self.tracking_summary().items():
@@ -465,18 +508,29 @@ class ControllerNode(Node):
 def main(args=None) -> int:
     """Console script ``hyst_controller_node`` (``--ros-args -p algorithm:=dmrac --params-file P``)."""
     import argparse
+    import signal
     import sys
+    import threading
+
+    from rclpy.signals import SignalHandlerOptions
 
     from rclpy.utilities import remove_ros_args
 
     ap = argparse.ArgumentParser(prog="hyst_controller_node", description=__doc__.split("\n\n")[0],
                                  epilog="parameters: --ros-args -p NAME:=VALUE (see the module docs / README)")
     ap.parse_args(remove_ros_args(args=sys.argv if args is None else args)[1:])
-    rclpy.init(args=args)
+    # SIGINT/SIGTERM only set a flag, read between spin_once calls. With rclpy's own handlers the signal also
+    # reached Python's default handler as a KeyboardInterrupt at an arbitrary bytecode — inside a subscription
+    # callback run by the EventsExecutor (which re-raised it as a bare RuntimeError while rclpy.ok() was still
+    # true: exit 1 with a traceback, ≈ 5 runs in 100 with states flowing) or inside destroy_node.
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         node = ControllerNode()
-        # EventsExecutor driven by spin_once: its spin() neither leaves on SIGINT/SIGTERM nor (in this rclpy)
+        # EventsExecutor driven by spin_once: its spin() neither leaves on a stop request nor (in this rclpy)
         # reliably runs timers; spin_once does both and keeps the per-message overhead low.
         try:
             from rclpy.experimental import EventsExecutor
@@ -484,15 +538,8 @@ def main(args=None) -> int:
         except ImportError:  # pragma: no cover - older rclpy
             executor = rclpy.executors.SingleThreadedExecutor()
         executor.add_node(node)
-        while rclpy.ok():
-            try:
-                executor.spin_once(timeout_sec=0.1)
-            except RuntimeError:
-                # SIGINT/SIGTERM shut the context down under a waiting EventsExecutor.spin_once, which then
-                # raises a bare pybind11 RuntimeError: that is a normal stop, anything else is not
-                if rclpy.ok():
-                    raise
-                break
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ControlError, ValueError, ParameterException) as err:

@@ -133,6 +133,12 @@ class DPPC(ModelBased):
         """Swap gains at run time; the current funnel is kept (re-initialised only if it no longer fits)."""
         self.gains = gains
 
+    def _rescale(self, old: MBWParams, new: MBWParams) -> None:
+        """The funnel λ (4.7) and the error integral are lengths in model units: same metres, new units."""
+        c = old.y_scale / new.y_scale
+        self._lam *= c
+        self._z *= c
+
     def _on_reset(self, y0: float, u0: float, r0: float) -> None:
         g = self.gains
         e0 = (y0 - r0) / self._ys

@@ -108,8 +108,9 @@ class OpenLoop(ModelBased):
     """Inverse-model feedforward: u_k such that the model's predicted output equals r_k; no feedback.
 
     Bumpless start: the model state starts at the measurement, and whatever difference remains between the
-    command in force and the first feedforward command is faded out with time constant ``bump_tau`` (s);
-    the model is advanced with the pure feedforward part.
+    course of the command in force (last command plus its last increment, see :func:`hyst_control.base.hand_over`)
+    and the first feedforward command is faded out with time constant ``bump_tau`` (s); the model is advanced
+    with the pure feedforward part.
     """
 
     name = "open_loop"
@@ -132,6 +133,10 @@ class OpenLoop(ModelBased):
     def sync_applied(self, u_applied: float) -> None:
         """Open loop follows its own model, not the measured side: nothing to synchronise."""
 
+    def _rescale(self, old: MBWParams, new: MBWParams) -> None:
+        """The model's predicted position, in the new model units (the same metres)."""
+        self._ym_state = self._pos(self._ym_state, old, new)
+
     def _on_reset(self, y0: float, u0: float, r0: float) -> None:
         self._ym_state = self._ym(y0)
         self._uff = u0
@@ -146,7 +151,10 @@ class OpenLoop(ModelBased):
         self._nu = nu
         u_ff = (p[7] * self._uff / us + nu) * us
         if self._bump != self._bump:
-            self._bump = self._u_prev - u_ff
+            # The bump is the departure from the command's course in force (u_{k−1} plus its last increment),
+            # not from u_{k−1}: holding u_{k−1} for a sample on a moving reference (10 Hz sine: ≈ 1.7 V per
+            # sample) and fading it out was itself the bump (pid → open_loop: +250 nm for ≈ 70 ms).
+            self._bump = self._u_prev + self._du - u_ff
         else:
             self._bump *= self._fade
         return u_ff + self._bump

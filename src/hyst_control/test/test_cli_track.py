@@ -72,3 +72,22 @@ def test_track_params_and_scenario_errors_are_one_line(extra, capsys, tmp_path):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "error" in err[0]
+
+
+@pytest.mark.parametrize("algorithm", ["dppc", "dmrac", "pid", "open_loop"])
+def test_track_on_a_resonant_stage_is_derated_with_a_warning_or_stable(algorithm, capsys):
+    """``hyst track --resonance 350:0.04`` (the hidden dynamics scenario): default gains are derated with a warning
+    and track; ``--stability warn`` runs them and the loop is unstable; ``refuse`` is one line, exit 2."""
+    assert main(["track", "--algorithm", algorithm, "--resonance", "350:0.04", "--seconds", "1", "--json"]) == 0
+    cap = capsys.readouterr()
+    out = json.loads(cap.out)
+    assert out["finite"] and out["rmse"] < (10e-6 if algorithm == "pid" else 0.3e-6)
+    if algorithm == "open_loop":
+        assert cap.err == "" and out["derated"] == {}
+        return
+    assert "derated" in cap.err and out["derated"] and out["spectral_radius"] < 1
+    assert main(["track", "--algorithm", algorithm, "--resonance", "350:0.04", "--seconds", "1", "--stability",
+                 "warn", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["rmse"] > 5e-6
+    assert main(["track", "--algorithm", algorithm, "--resonance", "350:0.04", "--stability", "refuse"]) == 2
+    assert "unstable" in capsys.readouterr().err

@@ -79,3 +79,28 @@ def test_bumpless_hand_over(first, second):
     before = du[300:598].max()
     assert du[599] <= before + 1.0, (du[599], before)
     assert np.all(np.isfinite(us))
+
+
+@pytest.mark.parametrize(("first", "second"), list(itertools.permutations(ALGORITHMS, 2)))
+def test_switch_adds_no_tracking_error(first, second):
+    """Every pair, tracking a 10 Hz sine on the exact model: the largest error in the 100 ms after the switch
+    stays within 1.25× the larger of the old algorithm's level (the 0.5 s before) and the new one's own
+    (0.2–0.5 s after), + 5 nm. Before the fix, X → open_loop held the last command for a sample and faded that
+    out: dppc → open_loop 8 → 260 nm, pid → open_loop 138 → 378 nm."""
+    ref = parse_reference("sine:10")
+    plant = default_plant(2000.0)
+    a = make_controller(first, pea_default(), DT)
+    b = make_controller(second, pea_default(), DT)
+    y = plant.reset(0.0)
+    a.reset(y, 0.0, ref(0.0))
+    ctrl, e = a, []
+    for k in range(3000):
+        r = ref(k * DT)
+        if k == 2000:
+            ctrl = hand_over(b, a, y)
+        u = ctrl.step(r, y)
+        y = plant.step(u)
+        e.append(abs(y - r))
+    e = np.array(e)
+    before, after, own = e[1000:2000].max(), e[2000:2200].max(), e[2400:].max()
+    assert after <= 1.25 * max(before, own) + 5e-9, (before, after, own)
