@@ -200,8 +200,12 @@ def run_closed_loop(controller: BaseController, reference: Reference | str, seco
     y_meas = plant.reset(u_cmd)
     controller.reset(y_meas, u_cmd, float(r[0]))
     r0 = float(r[0])
-    for _ in range(n_settle):
-        u_cmd = controller.step(r0, y_meas)
+    # The settle holds r(0); with a preview the last samples of it already aim at the run's first references.
+    ts = (np.arange(n_settle) - n_settle) * dt + preview
+    r_settle = np.where(ts < 0.0, r0, np.atleast_1d(ref.sample(np.maximum(ts, 0.0))[0])) if preview > 0 else \
+        np.full(n_settle, r0)
+    for j in range(n_settle):
+        u_cmd = controller.step(float(r_settle[j]), y_meas)
         y_meas = plant.step(u_cmd)
     for k in range(n):
         u_cmd = controller.step(float(r_ctrl[k]), y_meas)
