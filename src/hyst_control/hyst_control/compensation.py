@@ -9,8 +9,11 @@ the effects enter around them (:mod:`hyst_model.effects.online`):
   a saturating stroke bounds the reachable reference (a target beyond it is held at the limit and counted);
 * a transport delay is handled by a Smith predictor (the base model's undelayed minus delayed prediction is added
   to the measurement) and the reference is taken ``preview`` seconds ahead;
-* an effect without a per-sample form (drift: tied to the identification record's clock; a stage resonance:
-  the stability check's business; a user effect without :meth:`~hyst_model.effects.Effect.online`) is listed in
+* a stage resonance after the hysteresis (series, held input) is inverted on the reference with the state the
+  base model's prediction drives, and predicted out of the measurement (Smith); the stability check still judges
+  the gains against the raw resonance (conservative: it holds if the compensation's model is off);
+* an effect without a per-sample form (drift: tied to the identification record's clock; the feedback
+  structure of dynamics; a user effect without :meth:`~hyst_model.effects.Effect.online`) is listed in
   :attr:`Compensation.unused` with the reason, which the node logs and puts on ``/diagnostics``: never dropped
   silently.
 

@@ -21,9 +21,9 @@ def _plan(effects, **values):
 
 
 def test_plan_uses_what_has_an_inverse_and_names_the_rest():
-    comp = _plan(["creep", "drift", "dynamics", "hum"], creep__gain=0.01)
-    assert comp.names == ["creep"]
-    assert set(comp.unused) == {"drift", "dynamics", "hum"}
+    comp = _plan(["creep", "drift", "dynamics", "hum"], creep__gain=0.01, dynamics__fn=350.0, dynamics__zeta=0.04)
+    assert comp.names == ["creep", "dynamics"]
+    assert set(comp.unused) == {"drift", "hum"}
     assert "clock" in comp.unused["drift"] and "user effect" in comp.unused["hum"]
     assert "compensating creep" in comp.describe() and "not compensated: drift" in comp.describe()
 

@@ -97,7 +97,37 @@ def test_delay_smith_predictor_sees_the_undelayed_stage(side):
 
 
 def test_effects_without_online_form_say_why():
-    for name in ("drift", "dynamics"):
-        eff = EFFECTS[name](CFG)
-        assert eff.online(np.array([p.default for p in eff.params()])) is None
+    for name, cfg in (("drift", {}), ("dynamics", {"dynamics.structure": "feedback"}),
+                      ("dynamics", {"dynamics.hold": "foh"})):
+        eff = EFFECTS[name](dict(CFG, **cfg))
+        assert eff.online(np.array([p.default for p in eff.params()]), base=lambda: MBWStepper(pea_default())) is None
         assert len(eff.online_note) > 20
+
+
+@pytest.mark.parametrize("fn,zeta", [(350.0, 0.04), (800.0, 0.1), (150.0, 0.5)])
+def test_series_resonance_inverse_and_predictor_are_exact_on_the_model(fn, zeta):
+    """target() inverts the ZOH resonance exactly (filtering the targets gives the reference back), and with the
+    base model exact the measurement is the base output itself."""
+    from hyst_model.effects.dynamics import series_filter
+
+    t, u, _ = _record(3000)
+    m = pea_default()
+    st = MBWStepper(m)  # the base output from rest, as the predictor runs it
+    st.reset(float(u[0]))
+    x = np.array([st.step(float(v)) for v in u])
+    eff = EFFECTS["dynamics"](CFG)
+    inv = eff.online(np.array([fn, zeta]), base=lambda: MBWStepper(m))
+    y = series_filter(x, fn, zeta, DT, "zoh")  # the stage's reading under the base output x
+    assert np.max(np.abs(y - x)) > 1e-8
+    inv.reset(float(y[0]), float(u[0]))
+    xr = np.array([inv.measure(float(a), float(b)) for a, b in zip(y, u)])
+    assert np.max(np.abs(xr - x)) < 1e-15 + 1e-9 * float(np.max(np.abs(x)))
+    # feedforward: a smooth reference through the inverse, then through the resonance, is the reference
+    r = x + 1e-7 * np.sin(2 * np.pi * 7 * t)
+    inv2 = eff.online(np.array([fn, zeta]), base=lambda: MBWStepper(m))
+    inv2.reset(float(r[0]), float(u[0]))
+    xt = []
+    for k in range(r.size):
+        xt.append(inv2.target(float(r[k]), float(u[k])))
+        inv2._s = inv2._phi @ inv2._s + inv2._g * xt[-1]  # noqa: SLF001 - the stage achieved the target
+    assert np.max(np.abs(series_filter(np.array(xt), fn, zeta, DT, "zoh")[1:] - r[1:])) < 1e-12

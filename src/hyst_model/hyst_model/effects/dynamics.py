@@ -61,6 +61,7 @@ from scipy.linalg import expm
 from ..errors import EffectError
 from ..model import Param
 from .base import Effect
+from .online import OnlineEffect
 from .signals import corr, holds, sample_time, smooth
 
 __all__ = ["DynamicsEffect", "series_filter", "msd_bw_simulate", "upsample", "choose_structure",
@@ -247,8 +248,8 @@ class DynamicsEffect(Effect):
                "hysteresis drives the resonant stage (series), or the hysteresis is part of the spring force of "
                "a mass-spring-damper (feedback, as in the Bouc-Wen benchmark).")
     kind = "wrap"
-    online_note = ("a stage resonance after the hysteresis: the control laws do not invert it, it acts on the loop "
-                   "as unmodelled dynamics (the controller checks its gains against it)")
+    online_note = ("only the series structure with a held input (dynamics.hold: zoh) has a per-sample inverse; this "
+                   "one acts on the loop as unmodelled dynamics (the controller checks its gains against it)")
 
     def __init__(self, config: Mapping[str, object] | None = None):
         super().__init__(config)
@@ -336,6 +337,11 @@ class DynamicsEffect(Effect):
             y0 = float(theta[2]) * float(u[0])
             return self.simulate_feedback(theta, t, u, (y0, 0.0, float(theta[3]) * y0)) + offset
         return self.simulate_feedback(theta, t, u) + offset
+
+    def online(self, theta, base=None):
+        if self.structure != "series" or self.hold != "zoh" or base is None:
+            return None
+        return SeriesResonanceInverse(float(theta[0]), float(theta[1]), self.dt, base)
 
     # identification helpers -----------------------------------------------------------------------------
     def start(self, t, u, y, residual):
@@ -524,3 +530,40 @@ def choose_structure(base, t: np.ndarray, u: np.ndarray, y: np.ndarray, *,
         rmse[s] = float(v)
     best = min(rmse, key=rmse.get)
     return StructureChoice(best, rmse, results)
+
+
+class SeriesResonanceInverse(OnlineEffect):
+    """The series resonance for controllers: inverted on the reference, predicted out of the measurement.
+
+    * target: the ZOH recursion s_k = Φ s_{k−1} + Γ x_k reads y_k = (Φ s_{k−1})_0 + Γ_0 x_k, so the inner output
+      that makes the stage read r_k is x_k = (r_k − (Φ s_{k−1})_0) / Γ_0, with the state driven by the base
+      model's prediction of what the applied input achieved (noise-free; a command cut by the slew or range
+      limit leaves the state where the stage really is, not where the target wanted it); the inverse's zero
+      dynamics are stable where the sampled zero lies inside the unit circle (refused otherwise);
+    * measure: a Smith predictor, y + x̂ − H x̂ with x̂ the base model driven by the applied input, so the law
+      sees the stage without its resonance plus every model error (no inverse filter on sensor noise).
+    """
+
+    name = "dynamics"
+
+    def __init__(self, fn: float, zeta: float, dt: float, base) -> None:
+        self._phi, self._g, _ = _zoh_matrices(fn, zeta, dt)
+        if not abs(self._g[0]) > 1e-9:
+            raise ValueError(f"a {fn:g} Hz resonance has no direct feed-through at dt = {dt:g} s")
+        zeros = np.linalg.eigvals(self._phi - np.outer(self._phi @ self._g, [1.0, 0.0]) / self._g[0])
+        if np.max(np.abs(zeros)) >= 0.999:
+            raise ValueError(f"the {fn:g} Hz resonance's sampled zero lies on or outside the unit circle: "
+                             "its inverse would diverge")
+        self._pred = base()
+        self._s = np.zeros(2)  # resonance state driven by the base model's prediction
+
+    def reset(self, y, u):
+        self._s[:] = (self._pred.reset(u), 0.0)
+
+    def measure(self, y, u):
+        x_hat = self._pred.step(u)
+        self._s = self._phi @ self._s + self._g * x_hat
+        return y + x_hat - float(self._s[0])
+
+    def target(self, r, u):
+        return (r - float((self._phi @ self._s)[0])) / float(self._g[0])
