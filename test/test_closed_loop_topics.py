@@ -3,7 +3,8 @@
 The sim runs in ``lockstep`` mode (one sample per answered state, stamps k/rate), and the controller generates
 the 5 Hz sine itself at the state stamps (``reference:=sine:5``), so the run is deterministic on a loaded
 machine and comparable with the in-process loop. The test process records ``/stage/state`` and
-``/stage/command`` and switches ``algorithm`` through the parameter service (AsyncParameterClient) mid-run.
+``/stage/command`` and switches ``algorithm`` through the parameter service (AsyncParameterClient) mid-run,
+through every ordered pair of the four algorithms: no command jump and no tracking error beyond their own levels.
 """
 from __future__ import annotations
 
@@ -33,8 +34,10 @@ SIM = ("import sys, rclpy\nfrom rclpy.experimental import EventsExecutor\nfrom h
        "rclpy.init(args=sys.argv)\nn = SimNode()\nex = EventsExecutor()\nex.add_node(n)\n"
        "try:\n    while rclpy.ok():\n        ex.spin_once(timeout_sec=0.1)\nexcept BaseException:\n    pass\n"
        "finally:\n    n.destroy_node()\n    rclpy.try_shutdown()\n")
-SWITCHES = ((5.5, "dmrac"), (6.5, "pid"), (7.5, "open_loop"), (8.5, "dppc"))
-T_END = 9.5
+# Every ordered pair of the four algorithms once (an Eulerian circuit of the complete digraph from dppc).
+_ORDER = ("dmrac", "dppc", "pid", "dppc", "open_loop", "dmrac", "pid", "dmrac", "open_loop", "pid", "open_loop", "dppc")
+SWITCHES = tuple((5.5 + 0.6 * i, a) for i, a in enumerate(_ORDER))
+T_END = SWITCHES[-1][0] + 0.9
 
 
 def _stamp(m) -> float:
@@ -139,7 +142,18 @@ def test_topics_match_in_process_and_switching_is_bumpless(loop_processes):
     tc = ts[1:]
     steady = consecutive & (tc >= 1.0) & (tc < 5.0)
     typical = du[steady].max()
+    pairs = set()
+    e_all = y - ref(t)
+    prev = "dppc"
     for t_sw, alg in SWITCHES:
         near = consecutive & (tc >= t_sw - 0.3) & (tc <= t_sw + 0.5)
         assert near.sum() > 100
-        assert du[near].max() <= typical + 1.0, f"command jumped at the switch to {alg}"
+        assert du[near].max() <= typical + 1.0, f"command jumped at the switch {prev} -> {alg}"
+        # tracking error: the switch adds nothing beyond the two algorithms' own levels
+        before = np.abs(e_all[(t >= t_sw - 0.3) & (t < t_sw)]).max()
+        during = np.abs(e_all[(t >= t_sw) & (t < t_sw + 0.15)]).max()
+        settled = np.abs(e_all[(t >= t_sw + 0.3) & (t < t_sw + 0.6)]).max()
+        assert during <= 2.0 * max(before, settled) + 20e-9, (prev, alg, before, during, settled)
+        pairs.add((prev, alg))
+        prev = alg
+    assert len(pairs) == 12
