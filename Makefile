@@ -5,7 +5,7 @@ SHELL := /bin/bash
 VENV     ?= .venv
 PY       := $(VENV)/bin/python
 STAMP    := $(VENV)/.hyst-setup
-PKGS     := hyst_model hyst_control hyst_driver hyst_sim
+PKGS     := hyst_common hyst_model hyst_control hyst_driver hyst_sim
 PKG_META := $(foreach p,$(PKGS),src/$(p)/setup.py src/$(p)/package.xml)
 # Tests and demos stay on this machine and off other people's ROS graphs.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST

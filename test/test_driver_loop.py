@@ -11,7 +11,7 @@ leaves the stage at rest fails the absolute bound).
    around ``hyst_driver_node`` + ``hyst_emulator``, against the same controller and reference around
    ``hyst_sim_node``; tracking is the controller's own error on ``/controller/state`` (so the test does not load
    the machine with a 1 kHz listener), the median of three interleaved runs per loop. Both loops run as on a
-   rig: the stage node and the controller with ``rt_priority`` (SCHED_FIFO, :mod:`hyst_model.runtime`), the
+   rig: the stage node and the controller with ``rt_priority`` (SCHED_FIFO, :mod:`hyst_common.runtime`), the
    emulator — the stand-in for a microcontroller — above them. Without real-time scheduling, two CPU-bound
    processes beside the loop took the driver loop to 79–92 nm and the sim loop to 50–57 nm (1.6×, and up to
    3.3× in single runs); with it both stay at 22–28 nm.

@@ -46,6 +46,6 @@ if [ $ros_sourced = 0 ]; then
     "${pip[@]}" install -r requirements-ros.txt
 fi
 # Editable installs of the four packages (setuptools develop mode keeps console scripts in .venv/bin).
-"${pip[@]}" install --no-deps --no-build-isolation $(printf -- '-e src/%s ' hyst_model hyst_sim hyst_control hyst_driver)
-"$venv/bin/python" -c "import rclpy, numpy, numba, hyst_model" || { echo "error: setup incomplete" >&2; exit 1; }
+"${pip[@]}" install --no-deps --no-build-isolation $(printf -- '-e src/%s ' hyst_common hyst_model hyst_sim hyst_control hyst_driver)
+"$venv/bin/python" -c "import rclpy, numpy, numba, hyst_common, hyst_model" || { echo "error: setup incomplete" >&2; exit 1; }
 echo "hyst environment ready in $venv"

@@ -3,7 +3,7 @@
 Numerical core (no rclpy): :mod:`.base`, :mod:`.dppc`, :mod:`.dmrac`, :mod:`.pid`, :mod:`.limits`,
 :mod:`.reference`, :mod:`.loop`. Thin nodes: ``controller_node``, ``reference_node``, ``composed``.
 """
-import hyst_model  # noqa: F401  first: sets single-threaded BLAS before numpy loads (hyst_model.blas)
+import hyst_common  # noqa: F401  first: sets single-threaded BLAS before numpy loads (hyst_common.blas)
 
 from .base import BaseController, Controller, hand_over
 from .dmrac import DMRAC, TABLE53, DMRACGains

@@ -21,17 +21,15 @@ import time
 from dataclasses import dataclass
 from functools import lru_cache
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import ParameterException, ParameterUninitializedException
-from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from hyst_model.core import PARAM_NAMES, MBWParams, pea_default
-from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
+from hyst_common.node import AtomicParametersNode, run_node
+from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .base import check_model, hand_over
 from .compensation import Compensation, effect_parameters, plan_compensation
@@ -127,7 +125,7 @@ def _fp(lo, hi):
     return [FloatingPointRange(from_value=_F(lo), to_value=_F(hi), step=0.0)]
 
 
-class ControllerNode(Node):
+class ControllerNode(AtomicParametersNode):
     """The controller node; see the module docstring."""
 
     def __init__(self, **kwargs) -> None:
@@ -189,7 +187,7 @@ class ControllerNode(Node):
                         "at the state stamps (deterministic, e.g. with a lockstep sim); time 0 = first state"))
         d("rt_priority", 0, ParameterDescriptor(
             description="SCHED_FIFO priority of the node's threads (0 = normal scheduling; applies at start; "
-                        "see hyst_model.runtime)", read_only=True,
+                        "see hyst_common.runtime)", read_only=True,
             integer_range=[IntegerRange(from_value=0, to_value=RT_PRIORITY_MAX, step=1)]))
         d("state_decimation", 10, ParameterDescriptor(
             description="publish /controller/state every N samples", integer_range=[IntegerRange(
@@ -507,50 +505,8 @@ class ControllerNode(Node):
 
 def main(args=None) -> int:
     """Console script ``hyst_controller_node`` (``--ros-args -p algorithm:=dmrac --params-file P``)."""
-    import argparse
-    import signal
-    import sys
-    import threading
-
-    from rclpy.signals import SignalHandlerOptions
-
-    from rclpy.utilities import remove_ros_args
-
-    ap = argparse.ArgumentParser(prog="hyst_controller_node", description=__doc__.split("\n\n")[0],
-                                 epilog="parameters: --ros-args -p NAME:=VALUE (see the module docs / README)")
-    ap.parse_args(remove_ros_args(args=sys.argv if args is None else args)[1:])
-    # SIGINT/SIGTERM only set a flag, read between spin_once calls. With rclpy's own handlers the signal also
-    # reached Python's default handler as a KeyboardInterrupt at an arbitrary bytecode — inside a subscription
-    # callback run by the EventsExecutor (which re-raised it as a bare RuntimeError while rclpy.ok() was still
-    # true: exit 1 with a traceback, ≈ 5 runs in 100 with states flowing) or inside destroy_node.
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = ControllerNode()
-        # EventsExecutor driven by spin_once: its spin() neither leaves on a stop request nor (in this rclpy)
-        # reliably runs timers; spin_once does both and keeps the per-message overhead low.
-        try:
-            from rclpy.experimental import EventsExecutor
-            executor = EventsExecutor()
-        except ImportError:  # pragma: no cover - older rclpy
-            executor = rclpy.executors.SingleThreadedExecutor()
-        executor.add_node(node)
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ControlError, ValueError, ParameterException) as err:
-        # a bad start-up parameter (out of its declared range, wrong type, rejected): one line, exit 2
-        print(f"hyst_controller_node: error: {err}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(ControllerNode, args, prog="hyst_controller_node", errors=(ControlError,),
+                    usage="usage: hyst_controller_node [--ros-args -p NAME:=VALUE ... --params-file P]\n\n" + __doc__)
 
 
 if __name__ == "__main__":

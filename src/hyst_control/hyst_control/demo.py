@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= args.rt_priority <= 98:
         raise LoopError("--rt-priority must be 0 (normal scheduling) or 1-98")
     ros = ["--ros-args", "-p", f"rate:={args.rate}", "-p", "shape:=sine", "-p", f"frequency:={args.frequency}",
-           # real-time scheduling as on a rig (hyst_model.runtime): with it PID's worst error in this demo fell
+           # real-time scheduling as on a rig (hyst_common.runtime): with it PID's worst error in this demo fell
            # from 10-14 µm to 0.5-0.7 µm in most runs on the test machine (one run of five: 8.7 µm)
            "-p", f"hyst_sim:rt_priority:={args.rt_priority}", "-p", f"hyst_controller:rt_priority:={args.rt_priority}"]
     if args.lockstep:

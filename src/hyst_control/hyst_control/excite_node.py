@@ -14,13 +14,11 @@ node answers once more with the rest voltage and stops (exit 0). Parameters (all
 from __future__ import annotations
 
 import math
-import sys
 
-import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
+
+from hyst_common.node import AtomicParametersNode, run_node
 
 from .errors import ControlError
 from .excitation import PARTS, ExcitationSpec, build_excitation
@@ -37,7 +35,7 @@ def _ip(lo: int, hi: int) -> list:
     return [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
 
 
-class ExciteNode(Node):
+class ExciteNode(AtomicParametersNode):
     """Open-loop excitation player; see the module docstring. ``done`` is True after the last sample."""
 
     def __init__(self, **kwargs) -> None:
@@ -158,35 +156,16 @@ class ExciteNode(Node):
         return uk + off * 0.5 * (1.0 + math.cos(math.pi * x)) if 0.0 <= x < 1.0 else uk
 
 
+def _flush(node: "ExciteNode", stopped: bool) -> None:
+    if node.done and not node.flush(30.0):  # every command must reach every subscriber (a lagging recorder)
+        node.get_logger().warning("not every subscriber acknowledged the last commands within 30 s")
+
+
 def main(args=None) -> int:
     """Console script ``hyst_excite_node`` (``--ros-args -p rate:=2000.0 -p parts:=steps,sweep``)."""
-    import argparse
-
-    from rclpy.exceptions import ParameterException
-    from rclpy.utilities import remove_ros_args
-
-    ap = argparse.ArgumentParser(prog="hyst_excite_node", description=__doc__.split("\n\n")[0],
-                                 epilog="parameters: --ros-args -p NAME:=VALUE (see the module docs)")
-    ap.parse_args(remove_ros_args(args=sys.argv if args is None else args)[1:])
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ExciteNode()
-        while rclpy.ok() and not node.done:
-            rclpy.spin_once(node, timeout_sec=0.1)
-        if node.done:  # every command must reach every subscriber (a lagging recorder) before the publisher goes
-            if not node.flush(30.0):
-                node.get_logger().warning("not every subscriber acknowledged the last commands within 30 s")
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ControlError, ParameterException, ValueError) as err:
-        print(f"hyst_excite_node: {err}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(ExciteNode, args, prog="hyst_excite_node", errors=(ControlError,), executor="single",
+                    until=lambda n: n.done, on_exit=_flush,
+                    usage="usage: hyst_excite_node [--ros-args -p NAME:=VALUE ...]\n\n" + __doc__)
 
 
 if __name__ == "__main__":

@@ -10,12 +10,10 @@ from __future__ import annotations
 
 import math
 
-import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
+
+from hyst_common.node import AtomicParametersNode, run_node
 
 from .errors import ControlError
 from .reference import SHAPES, Reference
@@ -27,7 +25,7 @@ def _fp(lo, hi):
     return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
-class ReferenceNode(Node):
+class ReferenceNode(AtomicParametersNode):
     """Publishes a :class:`Reference` at ``rate``; see the module docstring."""
 
     def __init__(self, **kwargs) -> None:
@@ -95,30 +93,8 @@ class ReferenceNode(Node):
 
 def main(args=None) -> int:
     """Console script ``hyst_reference_node`` (``--ros-args -p shape:=sine -p frequency:=5.0``)."""
-    import argparse
-    import sys
-
-    from rclpy.utilities import remove_ros_args
-
-    ap = argparse.ArgumentParser(prog="hyst_reference_node", description=__doc__.split("\n\n")[0],
-                                 epilog="parameters: --ros-args -p NAME:=VALUE (see the module docs / README)")
-    ap.parse_args(remove_ros_args(args=sys.argv if args is None else args)[1:])
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ReferenceNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ControlError, ValueError, ParameterException) as err:
-        # a bad start-up parameter (out of its declared range, wrong type, rejected): one line, exit 2
-        print(f"hyst_reference_node: error: {err}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(ReferenceNode, args, prog="hyst_reference_node", errors=(ControlError,),
+                    usage="usage: hyst_reference_node [--ros-args -p NAME:=VALUE ...]\n\n" + __doc__)
 
 
 if __name__ == "__main__":

@@ -12,8 +12,9 @@ HYST = str(Path(sys.executable).parent / "hyst")
 
 
 def test_demo_records_a_bag_and_prints_the_summary(tmp_path):
+    # lockstep: the result does not depend on the machine's load, only the wall time does (generous deadline)
     proc = subprocess.run([HYST, "demo", "--lockstep", "--schedule", "dppc:1,pid:1", "--bags", str(tmp_path)],
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     rows = {ln.split()[0]: ln.split() for ln in proc.stdout.splitlines() if ln.startswith(("dppc ", "pid "))}
     assert set(rows) == {"dppc", "pid"}

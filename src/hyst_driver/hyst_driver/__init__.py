@@ -6,7 +6,7 @@ Layers: pure protocol modules (:mod:`.protocol_ascii` HDB/1, :mod:`.protocol_gcs
 (fake device on a pty, driven by ``hyst_sim.plant``); ``driver_node`` (the thin rclpy node, the only module
 importing rclpy).
 """
-import hyst_model  # noqa: F401  first: sets single-threaded BLAS before numpy loads (hyst_model.blas)
+import hyst_common  # noqa: F401  first: sets single-threaded BLAS before numpy loads (hyst_common.blas)
 
 from .adapter import PROTOCOLS, Adapter, AsciiAdapter, BadFrame, DeviceFault, GcsAdapter, Reading, make_adapter
 from .errors import ChecksumError, ConfigError, DriverError, EncodeError, LinkError, ProtocolError

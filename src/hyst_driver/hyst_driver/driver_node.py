@@ -27,7 +27,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
-from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
+from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 from hyst_sim.profiles import get_profile
 
 from .adapter import PROTOCOLS, make_adapter
@@ -104,7 +104,7 @@ def param_table(prof) -> list[tuple[str, object, tuple | None, str]]:
         ("link_timeout", 0.5, (0.005, 60.0), "no sample for this long (s): close the port and reconnect"),
         ("frame_id", "stage", None, "header.frame_id of /stage/state"),
         ("rt_priority", 0, (0, RT_PRIORITY_MAX), "SCHED_FIFO priority of the I/O and executor threads "
-         "(0 = normal scheduling; needs CAP_SYS_NICE or an rtprio limit; see hyst_model.runtime)"),
+         "(0 = normal scheduling; needs CAP_SYS_NICE or an rtprio limit; see hyst_common.runtime)"),
     ]
 
 

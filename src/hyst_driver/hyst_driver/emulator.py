@@ -25,7 +25,7 @@ import time
 import tty
 from dataclasses import dataclass
 
-from hyst_model.runtime import set_realtime
+from hyst_common.runtime import set_realtime
 
 from . import protocol_ascii as hdb
 from . import protocol_gcs as gcs

@@ -3,10 +3,7 @@
 Layers: :mod:`hyst_model.core` (numerical, numpy/numba only) · :mod:`hyst_model.io` (bags, CSV, params files)
 · ``*_node.py`` modules (thin rclpy nodes; the only place rclpy is imported).
 """
-from .blas import single_thread_blas
-
-# Before anything loads numpy (and with it BLAS): hyst's own processes use one BLAS thread (see .blas).
-single_thread_blas()
+import hyst_common  # noqa: F401  first: single-threaded BLAS before numpy loads (hyst_common.blas)
 
 # Lazy (PEP 562): ``hyst --help`` and an immediate argument error must not pay for numpy/numba (0.35 s of
 # imports, several seconds on a loaded machine); the names load on first use.

@@ -4,8 +4,7 @@ from __future__ import annotations
 __all__ = ["HystError", "DataError", "ParamsError", "FitError", "EffectError"]
 
 
-class HystError(Exception):
-    """Base class: the command line prints its message and exits non-zero, without a traceback."""
+from hyst_common.errors import HystError  # the root of every hyst error (re-exported)
 
 
 class DataError(HystError):

@@ -23,11 +23,8 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import ParameterException, ParameterUninitializedException
-from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -35,7 +32,7 @@ from std_msgs.msg import String
 
 from .core.mbw import PARAM_NAMES
 from .errors import HystError
-from .runtime import wants_help
+from hyst_common.node import AtomicParametersNode, run_node
 
 __all__ = ["IdentConfig", "IdentNode", "main", "fit_bag", "controller_parameters"]
 
@@ -147,7 +144,7 @@ def _fp(lo: float, hi: float) -> list[FloatingPointRange]:
     return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
-class IdentNode(Node):
+class IdentNode(AtomicParametersNode):
     """Refits the stage model from bags; see the module docstring."""
 
     def __init__(self, **kwargs):
@@ -360,27 +357,9 @@ class IdentNode(Node):
         return super().destroy_node()
 
 
-def main(args=None) -> None:
-    if wants_help(args, USAGE):
-        return
-    rclpy.init(args=args)
-    node = None
-    code = 0
-    try:
-        node = IdentNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (HystError, ParameterException) as err:  # bad start-up parameters: one line, exit 2
-        import sys
-        print(f"hyst_ident_node: error: {err}", file=sys.stderr)
-        code = 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if code:
-        raise SystemExit(code)
+def main(args=None) -> int:
+    """Console script ``hyst_ident_node``."""
+    return run_node(IdentNode, args, prog="hyst_ident_node", usage=USAGE, executor="single")
 
 
 if __name__ == "__main__":

@@ -31,24 +31,20 @@ simulates a short record to finite values) and applied by swapping a frozen conf
 from __future__ import annotations
 
 import math
-import sys
 import time
 from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
-import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import ParameterException, ParameterUninitializedException
-from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from .core import mbw_rest_state, mbw_step
 from .errors import HystError
 from .model import MBWModel, Model
-from .runtime import wants_help
+from hyst_common.node import AtomicParametersNode, run_node
 from .spec import build_model
 
 __all__ = ["ResidualNode", "ResidualSettings", "main"]
@@ -85,7 +81,7 @@ def _stamp(msg: JointState) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
-class ResidualNode(Node):
+class ResidualNode(AtomicParametersNode):
     """Publishes model prediction and residual for every ``/stage/state`` sample."""
 
     def __init__(self, **kwargs):
@@ -289,23 +285,7 @@ class ResidualNode(Node):
 
 def main(args=None) -> int:
     """Console script ``hyst_residual_node`` (``--ros-args --params-file P``)."""
-    if wants_help(args, USAGE):
-        return
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ResidualNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (HystError, ValueError, ParameterException) as err:  # bad start-up parameters: one line, exit 2
-        print(f"hyst_residual_node: error: {err}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(ResidualNode, args, prog="hyst_residual_node", usage=USAGE, executor="single")
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ Layers: :mod:`hyst_sim.plant` and :mod:`hyst_sim.truth_effects` (numerical core,
 :mod:`hyst_sim.profiles` (amplifier/stage limits shared with the driver), :mod:`hyst_sim.scenario` and
 :mod:`hyst_sim.bagio` (file IO), ``*_node.py`` (thin rclpy nodes; the only modules importing rclpy).
 """
-import hyst_model  # noqa: F401  first: sets single-threaded BLAS before numpy loads (hyst_model.blas)
+import hyst_common  # noqa: F401  first: sets single-threaded BLAS before numpy loads (hyst_common.blas)
 
 from .errors import BagError, ConfigError, ScenarioError, SimError
 from .plant import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, Plant, PlantConfig, RunResult, StepResult

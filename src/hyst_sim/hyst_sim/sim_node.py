@@ -37,19 +37,14 @@ import math
 import threading
 import time
 
-import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
                                 SetParametersResult)
-from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.parameter import Parameter
-from rclpy.parameter_service import ParameterService
 from sensor_msgs.msg import JointState
 
-from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
+from hyst_common.node import AtomicParametersNode, run_node
+from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .errors import SimError
 from .plant import Plant
@@ -68,33 +63,11 @@ def _fp(lo: float, hi: float) -> list:
     return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
-class _AllOrNothingParameterService(ParameterService):
-    """The node's parameter services, with ``set_parameters`` going through :meth:`SimNode.set_parameters`.
-
-    rclpy's service sets each parameter of a request on its own, so a remote ``[v_min=100, v_max=50]`` still
-    applied v_min; here the request is validated as one resulting configuration (one result per parameter).
-    """
-
-    def _set_parameters_callback(self, request, response):
-        params = [Parameter.from_parameter_msg(p) for p in request.parameters]
-        try:
-            response.results = self._get_node().set_parameters(params)
-        except ParameterNotDeclaredException:  # its message names none (rclpy consumes the generator first)
-            node = self._get_node()
-            names = ", ".join(p.name for p in params if not node.has_parameter(p.name))
-            response.results = [SetParametersResult(successful=False, reason=f"undeclared parameter(s): {names}; "
-                                                    "none of this request applied")] * len(params)
-        return response
-
-
-class SimNode(Node):
+class SimNode(AtomicParametersNode):
     """The simulated stage node; see the module docstring."""
 
     def __init__(self, **kwargs) -> None:
-        services = kwargs.pop("start_parameter_services", True)
-        super().__init__("hyst_sim", start_parameter_services=False, **kwargs)
-        if services:
-            self._parameter_service = _AllOrNothingParameterService(self)
+        super().__init__("hyst_sim", **kwargs)  # parameter sets all or nothing (AtomicParametersNode)
         self._declare_parameters()
         self._settings = self._read_settings()
         try:
@@ -176,7 +149,7 @@ class SimNode(Node):
                                          integer_range=[IntegerRange(from_value=0, to_value=2**31 - 1, step=1)]))
         d("rt_priority", 0, ParameterDescriptor(
             description="SCHED_FIFO priority of the node's threads, as the driver's (0 = normal scheduling; "
-                        "applies at start; see hyst_model.runtime)", read_only=True,
+                        "applies at start; see hyst_common.runtime)", read_only=True,
             integer_range=[IntegerRange(from_value=0, to_value=RT_PRIORITY_MAX, step=1)]))
         for name in EFFECT_NAMES:
             spec = Effects.spec(name)
@@ -202,16 +175,6 @@ class SimNode(Node):
             v_safe=float(get("v_safe")), safe_ramp_rate=float(get("safe_ramp_rate")), frame_id=str(get("frame_id")),
             mode=str(get("mode")), params_file=str(get("params_file")), scenario_file=str(get("scenario_file")),
             seed=int(get("seed")), effects=tuple((n, get(f"effects.{n}")) for n in EFFECT_NAMES))
-
-    def set_parameters(self, parameter_list):
-        """All or nothing (issue 13): the whole list is validated as one resulting configuration.
-
-        rclpy's ``Node.set_parameters`` validates and applies each parameter on its own, so
-        ``[v_min=100, v_max=50]`` rejected v_min and applied v_max; here both are rejected (one result per
-        parameter, all equal).
-        """
-        result = self.set_parameters_atomically(parameter_list)
-        return [result] * len(parameter_list)
 
     def _on_set(self, params) -> SetParametersResult:
         changes = {p.name: p.value for p in params}
@@ -458,41 +421,7 @@ def _time_from_ns(ns: int) -> Time:
 
 def main(args=None) -> int:
     """Console script ``hyst_sim_node`` (``--ros-args -p rate:=2000.0 -p mode:=lockstep ...``)."""
-    import sys
-
-    from rclpy.utilities import remove_ros_args
-
-    user_args = remove_ros_args(args if args is not None else sys.argv)[1:]
-    if user_args:
-        if set(user_args) & {"-h", "--help"}:
-            print(usage())
-            return 0
-        print(f"hyst_sim_node: unexpected argument(s) {' '.join(user_args)}; settings are ROS parameters "
-              "(--ros-args -p name:=value); see --help", file=sys.stderr)
-        return 2
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SimNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        try:
-            executor.spin()
-        except RuntimeError:
-            # a signal that shuts the context down inside a wait can surface as a bare RuntimeError (as in the
-            # controller node): a normal stop; anything while the context is still up is not
-            if rclpy.ok():
-                raise
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (SimError, ParameterException) as err:  # bad start-up parameters: one line, no traceback
-        print(f"hyst_sim_node: {err}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(SimNode, args, prog="hyst_sim_node", usage=usage(), errors=(SimError,), executor="single")
 
 
 if __name__ == "__main__":

@@ -1,12 +1,12 @@
-"""hyst_model.runtime: real-time scheduling for the loop nodes, and what happens when it is not allowed."""
+"""hyst_common.runtime: real-time scheduling for the loop nodes, and what happens when it is not allowed."""
 import os
 import subprocess
 import sys
 
 import pytest
 
-from hyst_model import runtime
-from hyst_model.runtime import RT_PRIORITY_MAX, set_realtime
+from hyst_common import runtime
+from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 
 def test_zero_keeps_normal_scheduling_and_bad_values_are_one_error():
@@ -31,7 +31,7 @@ def test_every_thread_of_the_process_gets_fifo_where_allowed():
     middleware's receive threads) and after it both end up SCHED_FIFO at the priority."""
     code = """
 import os, threading, time
-from hyst_model.runtime import set_realtime
+from hyst_common.runtime import set_realtime
 ev = threading.Event(); seen = {}
 def early():
     seen['early'] = threading.get_native_id(); ev.wait()
@@ -57,7 +57,7 @@ def test_thread_list_is_this_process():
 
 
 def test_help_is_ours_only_before_ros_args(capsys):
-    from hyst_model.runtime import own_args, wants_help
+    from hyst_common.runtime import own_args, wants_help
     assert own_args(["-h", "--ros-args", "-p", "a:=1"]) == ["-h"]
     assert own_args(["--ros-args", "--help"]) == []
     assert wants_help(["--help"], "usage: x") and capsys.readouterr().out == "usage: x\n"

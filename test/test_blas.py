@@ -30,5 +30,5 @@ def test_a_users_thread_setting_is_kept():
 def test_it_reports_when_it_comes_too_late():
     import numpy  # noqa: F401  (loaded by the test session already)
 
-    from hyst_model.blas import single_thread_blas
+    from hyst_common.blas import single_thread_blas
     assert single_thread_blas() is False

@@ -1,0 +1,19 @@
+"""hyst_common: the bottom of the hyst packages.
+
+* :mod:`hyst_common.errors` — :class:`HystError`, the root of every hyst error;
+* :mod:`hyst_common.blas` — single-threaded BLAS for hyst's processes (set here, before anything loads numpy);
+* :mod:`hyst_common.runtime` — real-time scheduling and ROS-argument-aware command-line helpers (rclpy-free);
+* :mod:`hyst_common.node` — the one way to run a node (:func:`~hyst_common.node.run_node`) and all-or-nothing
+  parameter sets (:class:`~hyst_common.node.AtomicParametersNode`): with the ``*_node.py`` modules, the only
+  place that imports rclpy (docs/ARCHITECTURE.md).
+
+It depends on no other hyst package; every other package imports it first.
+"""
+from .blas import single_thread_blas
+
+# Before anything loads numpy (and with it BLAS): hyst's own processes use one BLAS thread (see .blas).
+single_thread_blas()
+
+from .errors import HystError  # noqa: E402
+
+__all__ = ["HystError", "single_thread_blas"]

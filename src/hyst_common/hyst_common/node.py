@@ -1,0 +1,157 @@
+"""The one way to run a hyst node, and parameter sets that are all or nothing.
+
+With the ``*_node.py`` modules this is the only place that imports rclpy (docs/ARCHITECTURE.md).
+
+:func:`run_node` is every node's ``main``: ``--help`` answered before ROS starts, unexpected arguments refused
+with one line, SIGINT/SIGTERM turned into a flag the spin loop reads (rclpy's own handlers are off: a
+``KeyboardInterrupt`` raised inside a subscription callback came back from the EventsExecutor as a bare
+``RuntimeError`` — exit 1 with a traceback in ≈ 5 of 100 stops), a start-up error (a parameter out of its range,
+a rejected value, a missing file) as one line on stderr and exit code 2, and ``destroy_node`` plus
+``rclpy.try_shutdown`` whatever happens.
+
+:class:`AtomicParametersNode` makes every parameter set all or nothing: rclpy's ``set_parameters`` (the method and
+the ``~/set_parameters`` service) validates and applies each parameter alone, so ``[v_min=100, v_max=50]`` applied
+``v_max=50`` next to a refused ``v_min``. Here the list is validated as one resulting configuration by the node's
+on-set callback and applied whole or not at all (one result per parameter, all equal).
+"""
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from collections.abc import Callable, Sequence
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
+from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_service import ParameterService
+from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
+
+from .errors import HystError
+
+__all__ = ["run_node", "AtomicParametersNode", "fp_range", "int_range", "STARTUP_ERRORS"]
+
+#: What a node may raise while it starts because of what the user gave it: one line, exit 2.
+STARTUP_ERRORS: tuple[type[BaseException], ...] = (HystError, ValueError, ParameterException)
+
+
+def fp_range(lo: float, hi: float) -> list[FloatingPointRange]:
+    """``floating_point_range`` of a ParameterDescriptor (continuous)."""
+    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+
+
+def int_range(lo: int, hi: int) -> list[IntegerRange]:
+    """``integer_range`` of a ParameterDescriptor (step 1)."""
+    return [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+
+
+class _AllOrNothingService(ParameterService):
+    """The node's parameter services, ``set_parameters`` going through :meth:`AtomicParametersNode.set_parameters`."""
+
+    def _set_parameters_callback(self, request, response):
+        params = [Parameter.from_parameter_msg(p) for p in request.parameters]
+        node = self._get_node()
+        try:
+            response.results = node.set_parameters(params)
+        except ParameterNotDeclaredException:
+            names = ", ".join(p.name for p in params if not node.has_parameter(p.name))
+            response.results = [SetParametersResult(successful=False, reason=f"undeclared parameter(s): {names}; "
+                                                    "none of this request applied")] * len(params)
+        return response
+
+
+class AtomicParametersNode(Node):
+    """A :class:`rclpy.node.Node` whose parameter sets are all or nothing (see the module docstring)."""
+
+    def __init__(self, node_name: str, **kwargs) -> None:
+        services = kwargs.pop("start_parameter_services", True)
+        super().__init__(node_name, start_parameter_services=False, **kwargs)
+        if services:
+            self._parameter_service = _AllOrNothingService(self)
+
+    def set_parameters(self, parameter_list: Sequence[Parameter]) -> list[SetParametersResult]:
+        """Validate ``parameter_list`` as one configuration and apply it whole or not at all."""
+        result = self.set_parameters_atomically(list(parameter_list))
+        return [result] * len(parameter_list)
+
+
+def _executor(kind: str):
+    if kind == "events":
+        try:
+            from rclpy.experimental import EventsExecutor  # noqa: PLC0415 - optional in older rclpy
+            return EventsExecutor()
+        except ImportError:  # pragma: no cover - older rclpy
+            pass
+    return SingleThreadedExecutor()
+
+
+def run_node(make: Callable[[], Node], args: Sequence[str] | None = None, *, prog: str, usage: str,
+             executor: str = "events", until: Callable[[Node], bool] | None = None,
+             on_exit: Callable[[Node, bool], None] | None = None,
+             errors: tuple[type[BaseException], ...] = ()) -> int:
+    """Run the node ``make()`` until a signal, ``until(node)`` or the context ends; return the exit code.
+
+    Parameters
+    ----------
+    make : callable
+        Builds the node (after ``rclpy.init``); start-up errors (:data:`STARTUP_ERRORS` and ``errors``) raised
+        here become one line on stderr and exit code 2.
+    args : sequence of str, optional
+        ``sys.argv`` by default; ROS arguments (``--ros-args ...``) are rclpy's, anything else is refused.
+    prog, usage : str
+        Program name for messages, and the text ``--help`` prints (before ROS starts).
+    executor : {"events", "single"}
+        ``events``: rclpy's EventsExecutor (lowest per-message overhead; driven by ``spin_once``, which leaves on a
+        stop request and runs timers); ``single``: the SingleThreadedExecutor.
+    until : callable, optional
+        Stop when it returns True (a node that finishes its work, e.g. an excitation).
+    on_exit : callable, optional
+        ``on_exit(node, stopped_by_signal)`` before the node is destroyed (flush, ramp to a safe output).
+    errors : tuple of exception types
+        Further start-up errors of the node's own package.
+    """
+    argv = list(sys.argv if args is None else args)
+    own = remove_ros_args(args=argv)[1:]
+    if own:
+        if set(own) & {"-h", "--help"}:
+            print(usage)
+            return 0
+        print(f"{prog}: error: unexpected argument(s) {' '.join(own)}; settings are ROS parameters "
+              "(--ros-args -p name:=value); see --help", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = {}
+    if in_main:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, lambda *_: stop.set())
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        try:
+            node = make()
+        except STARTUP_ERRORS + tuple(errors) as err:
+            print(f"{prog}: error: {err}", file=sys.stderr)
+            return 2
+        ex = _executor(executor)
+        ex.add_node(node)
+        try:
+            while not stop.is_set() and rclpy.ok() and not (until is not None and until(node)):
+                ex.spin_once(timeout_sec=0.1)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            stop.set()
+        if on_exit is not None:
+            on_exit(node, stop.is_set())
+        ex.shutdown()
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+    return 0
+

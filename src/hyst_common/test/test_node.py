@@ -1,0 +1,132 @@
+"""hyst_common.node: all-or-nothing parameter sets (method and remote service) and the one node runner."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
+
+from hyst_common.node import AtomicParametersNode, fp_range  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+
+class Window(AtomicParametersNode):
+    """A window [v_min, v_max] that must stay ordered: the case rclpy applied half of."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("window", **kwargs)
+        for n, v in (("v_min", 0.0), ("v_max", 150.0)):
+            self.declare_parameter(n, v, ParameterDescriptor(floating_point_range=fp_range(-200, 200)))
+        self.add_on_set_parameters_callback(self._on_set)
+
+    def _on_set(self, params) -> SetParametersResult:
+        vals = {n: self.get_parameter(n).value for n in ("v_min", "v_max")}
+        vals.update({p.name: p.value for p in params})
+        if not vals["v_min"] < vals["v_max"]:
+            return SetParametersResult(successful=False, reason="v_min must be below v_max")
+        return SetParametersResult(successful=True)
+
+
+@pytest.fixture
+def ctx():
+    c = rclpy.Context()
+    rclpy.init(context=c)
+    yield c
+    rclpy.try_shutdown(context=c)
+
+
+def _values(node) -> tuple[float, float]:
+    return node.get_parameter("v_min").value, node.get_parameter("v_max").value
+
+
+def test_a_set_is_validated_as_one_configuration_locally(ctx):
+    node = Window(context=ctx)
+    res = node.set_parameters([Parameter("v_min", value=100.0), Parameter("v_max", value=50.0)])
+    assert [r.successful for r in res] == [False, False] and "below" in res[0].reason
+    assert _values(node) == (0.0, 150.0)  # nothing applied (rclpy alone applied v_min=100, then refused v_max)
+    res = node.set_parameters([Parameter("v_max", value=50.0), Parameter("v_min", value=10.0)])
+    assert all(r.successful for r in res) and _values(node) == (10.0, 50.0)  # fine as a whole, in any order
+    node.destroy_node()
+
+
+def test_the_remote_service_is_all_or_nothing_too(ctx):
+    node = Window(context=ctx)
+    peer = rclpy.create_node("peer", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    ex.add_node(peer)
+    client = AsyncParameterClient(peer, "window")
+    try:
+        deadline = time.monotonic() + 30
+        while not client.services_are_ready() and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.05)
+        fut = client.set_parameters([Parameter("v_min", value=100.0), Parameter("v_max", value=50.0)])
+        ex.spin_until_future_complete(fut, timeout_sec=30)
+        results = fut.result().results
+        assert [r.successful for r in results] == [False, False]
+        assert _values(node) == (0.0, 150.0)
+        fut = client.set_parameters([Parameter("nope", value=1.0), Parameter("v_max", value=60.0)])
+        ex.spin_until_future_complete(fut, timeout_sec=30)
+        assert not any(r.successful for r in fut.result().results)
+        assert "nope" in fut.result().results[0].reason and _values(node) == (0.0, 150.0)
+    finally:
+        ex.shutdown()
+        peer.destroy_node()
+        node.destroy_node()
+
+
+RUNNER = r'''
+import sys
+from rcl_interfaces.msg import ParameterDescriptor
+from hyst_common.node import AtomicParametersNode, fp_range, run_node
+
+class Probe(AtomicParametersNode):
+    def __init__(self):
+        super().__init__("probe")
+        self.declare_parameter("gain", 1.0, ParameterDescriptor(floating_point_range=fp_range(0, 10)))
+        print("probe up", flush=True)
+
+sys.exit(run_node(Probe, prog="probe_node", usage="usage: probe_node [--ros-args ...]"))
+'''
+
+
+def _run(*argv: str, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", RUNNER, *argv], capture_output=True, text=True, timeout=120, **kw)
+
+
+def test_runner_help_and_argument_errors_before_ros():
+    r = _run("--help")
+    assert r.returncode == 0 and "usage: probe_node" in r.stdout and not r.stderr.strip()
+    r = _run("--bogus")
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0 and "probe_node: error:" in r.stderr
+
+
+def test_runner_start_up_error_is_one_line_exit_2():
+    r = _run("--ros-args", "-p", "gain:=-5.0")
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("probe_node: error:"), r.stderr
+    assert "gain" in lines[0] and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_runner_stops_cleanly_on_a_signal(sig):
+    p = subprocess.Popen([sys.executable, "-c", RUNNER], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=dict(os.environ))
+    try:
+        assert p.stdout.readline().strip() == "probe up"  # waits for the node, not for a fixed time
+        p.send_signal(sig)
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 0 and "Traceback" not in err, err
