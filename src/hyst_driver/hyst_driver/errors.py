@@ -1,10 +1,10 @@
-"""Exceptions of hyst_driver, all derived from :class:`DriverError` (itself a :class:`hyst_model.errors.HystError`).
+"""Exceptions of hyst_driver, all derived from :class:`DriverError` (itself a :class:`hyst_common.errors.HystError`).
 
 Nodes catch these: a bad frame or a lost port is counted and reported on ``/diagnostics``, never fatal.
 """
 from __future__ import annotations
 
-from hyst_model.errors import HystError
+from hyst_common.errors import HystError
 
 __all__ = ["DriverError", "ProtocolError", "ChecksumError", "EncodeError", "LinkError",
            "ConfigError"]
