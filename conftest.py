@@ -25,3 +25,18 @@ def ctx():
     rclpy.init(context=c)
     yield c
     rclpy.try_shutdown(context=c)
+
+
+@pytest.fixture(autouse=True)
+def _effect_registry_restored():
+    """Effects a test registers (a user effect module, a test effect) leave with the test: a later in-process
+    ``hyst diagnose`` would otherwise screen them as candidates (a leaked failing effect came out as a candidate
+    with no RMSE)."""
+    import sys
+
+    yield
+    compose = sys.modules.get("hyst_model.effects.compose")
+    if compose is not None:
+        builtin = {n: c for n, c in compose.EFFECTS.items() if c.__module__.startswith("hyst_model.effects.")}
+        compose.EFFECTS.clear()
+        compose.EFFECTS.update(builtin)
