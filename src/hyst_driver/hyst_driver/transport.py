@@ -182,6 +182,9 @@ class LinkHealth:
     clipped: int = 0
     rejected: int = 0
     slew_limited: int = 0
+    held: int = 0
+    expired: int = 0
+    unexplained: int = 0
 
 
 class DeviceLink:
@@ -302,7 +305,8 @@ class DeviceLink:
         """A copy of the health record, limiter counts included."""
         c = self.limiter.counts
         return replace(self.health, bad_frames=dict(self.health.bad_frames), clipped=c.clipped,
-                       rejected=c.rejected, slew_limited=c.slew_limited)
+                       rejected=c.rejected, slew_limited=c.slew_limited, held=c.held, expired=c.expired,
+                       unexplained=c.unexplained)
 
     def service(self, now: float | None = None) -> list[tuple[float, Reading]]:
         """Do everything that is due; return ``(sample_time, reading)`` pairs (sample time on :attr:`clock`:
@@ -386,7 +390,12 @@ class DeviceLink:
                     self.transport.write(self.adapter.read_once())  # still moving (or corrupted): read again
                 return
             h.samples += 1
-            out.append((now if ev.device_time is None else self.device_clock.map(ev.device_time, now), ev))
+            t = now if ev.device_time is None else self.device_clock.map(ev.device_time, now)
+            out.append((t, ev))
+            # The limiter learns what the amplifier applies, at which device sample: a polled reply was taken
+            # after its poll left (a late reply to the previous poll, at most sample_timeout earlier).
+            self.limiter.observe(ev.applied_v, t if ev.device_time is not None or self.adapter.streaming
+                                 else self._last_poll - self.sample_timeout)
         elif isinstance(ev, BadFrame):
             h.bad_frames[ev.kind] = h.bad_frames.get(ev.kind, 0) + 1
         elif isinstance(ev, DeviceFault):
@@ -398,11 +407,14 @@ class DeviceLink:
 
     def _write_voltage(self, now: float) -> None:
         v = self.limiter.step(now - self._last_write)
+        if self.limiter.hold:  # the device has not yet confirmed enough to allow any new voltage: write nothing
+            return
         try:
             data = self.adapter.set_voltage(v)
         except EncodeError:  # cannot happen for limiter output; counted, never sent
             self.health.encode_errors += 1
             return
+        self.limiter.sent(now)  # before the bytes: a write that fails half-way may still reach the device
         self.transport.write(data)
         self._last_write = now
         self.health.writes += 1

@@ -88,6 +88,27 @@ def assert_received_within(received, limits: Limits) -> None:
     assert worst <= step, f"consecutive voltages differ by {worst} V > {step} V"
 
 
+def assert_applied_within(device, limits: Limits, start: int = 0) -> None:
+    """The voltage the emulated amplifier applied, sample by sample from ``start``: no step larger than one
+    sample of slew (two setpoints delivered within one sample count as the one step the stage feels), and inside
+    the window from the first sample the driver's first write moved it (it starts at the profile's 0 V)."""
+    a = device.applied[start:]
+    assert len(a) > 1, "the device took no samples"
+    step = limits.slew_max * limits.dt_max + 1e-6
+    worst = max(abs(a[k] - a[k - 1]) for k in range(1, len(a)))
+    assert worst <= step, f"the applied voltage stepped {worst} V in one device sample > {step} V"
+    moved = next((k for k in range(len(a)) if a[k] != a[0]), len(a))
+    if moved < len(a):
+        lo, hi = min(a[moved:]), max(a[moved:])
+        assert limits.v_min <= lo and hi <= limits.v_max, (lo, hi)
+
+
+@pytest.fixture
+def check_applied():
+    """The invariant checker :func:`assert_applied_within`."""
+    return assert_applied_within
+
+
 @pytest.fixture
 def check_received():
     """The invariant checker :func:`assert_received_within` (fixtures avoid importing conftest)."""

@@ -171,6 +171,21 @@ def max_slew_step(dev) -> float:
     return worst
 
 
+def max_applied_step(dev) -> float:
+    """Largest change (V) of the voltage the amplifier applied between consecutive device samples: the step the
+    stage feels, whichever commands produced it (two delivered within one sample count as one step)."""
+    a = dev.applied
+    return max((abs(a[k] - a[k - 1]) for k in range(1, len(a))), default=0.0)
+
+
+def test_applied_step_check_sees_two_commands_within_one_sample():
+    class Dev:
+        applied = [10.0, 10.0, 30.0, 50.0]
+    assert max_applied_step(Dev) == pytest.approx(20.0)
+    Dev.applied = [10.0, 10.0, 50.0]  # 30 V and 50 V arrived within one sample: received steps 20 + 20 V
+    assert max_applied_step(Dev) == pytest.approx(40.0)
+
+
 def test_slew_check_judges_steps_across_a_reconnect_from_the_applied_voltage():
     class Dev:
         received = [10.0, 30.0, 50.0, 70.5, 90.0]
@@ -226,7 +241,16 @@ def test_node_survives_every_fault_class_and_ramps_to_safe_on_sigint(ctx, emu):
     rx = emu.device.received
     assert rx[-1] == 20.0
     assert 10.0 <= min(rx) and max(rx) <= 120.0
+    a = emu.device.applied
+    first = next(k for k, v in enumerate(a) if v != a[0])
+    print(f"\nfault test: max applied step {max_applied_step(emu.device):.6f} V over {len(a)} samples, "
+          f"applied in [{min(a[first:]):.6f}, {max(a[first:]):.6f}] V, max received step "
+          f"{max_slew_step(emu.device):.6f} V")
     assert max_slew_step(emu.device) <= 20.0 + 1e-6
+    # judged against the voltage actually applied, sample by sample (the stage starts at 0 V; the driver's
+    # first write is v_min = 10 V, a 10 V step)
+    assert max_applied_step(emu.device) <= 20.0 + 1e-6, max_applied_step(emu.device)
+    assert 10.0 <= min(a[first:]) and max(a[first:]) <= 120.0
 
 
 def test_help_lists_every_parameter_and_exits_0(capsys):

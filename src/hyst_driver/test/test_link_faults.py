@@ -20,7 +20,7 @@ def _recovered(rig, after_samples: int) -> bool:
 @pytest.mark.slow
 @pytest.mark.parametrize("protocol", PROTOCOLS)
 @pytest.mark.parametrize("fault", ["garbage", "partial", "checksum", "error"])
-def test_frame_faults_100_runs(make_rig, check_received, test_limits, protocol, fault):
+def test_frame_faults_100_runs(make_rig, check_received, check_applied, test_limits, protocol, fault):
     rig = make_rig(protocol, seed=sum(map(ord, protocol + fault)), link_timeout=0.5)  # loaded CI: no spurious drops
     assert rig.run_until(lambda: rig.link.health.state == "running", 2.0), rig.link.health
     h = rig.link.health
@@ -46,11 +46,12 @@ def test_frame_faults_100_runs(make_rig, check_received, test_limits, protocol, 
         # a corrupted digit can pass as a number, so only the checksum fault may go unnoticed there.
         assert noticed >= 0.9 * RUNS, noticed
     check_received(rig.device.received, test_limits)
+    check_applied(rig.device, test_limits)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("protocol", PROTOCOLS)
-def test_timeouts_100_runs(make_rig, check_received, test_limits, protocol):
+def test_timeouts_100_runs(make_rig, check_received, check_applied, test_limits, protocol):
     rig = make_rig(protocol, seed=7, link_timeout=0.25)
     assert rig.run_until(lambda: rig.link.health.state == "running", 2.0)
     h = rig.link.health
@@ -67,11 +68,12 @@ def test_timeouts_100_runs(make_rig, check_received, test_limits, protocol):
     # exact counts would test the host's scheduler: a stall of this process may add a timeout or a reconnect
     assert h.timeouts <= RUNS + 0.1 * RUNS and short_drops <= 0.05 * RUNS, (h.timeouts, short_drops)
     check_received(rig.device.received, test_limits)
+    check_applied(rig.device, test_limits)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("protocol, runs", [("ascii", RUNS), ("gcs", RUNS)])
-def test_unplug_and_replug_100_runs(make_rig, check_received, test_limits, protocol, runs):
+def test_unplug_and_replug_100_runs(make_rig, check_received, check_applied, test_limits, protocol, runs):
     rig = make_rig(protocol, seed=11)
     assert rig.run_until(lambda: rig.link.health.state == "running", 2.0)
     h = rig.link.health
@@ -84,9 +86,10 @@ def test_unplug_and_replug_100_runs(make_rig, check_received, test_limits, proto
         assert _recovered(rig, h.samples)
     assert rig.emu.injected["unplug"] == runs
     check_received(rig.device.received, test_limits)
+    check_applied(rig.device, test_limits)
 
 
-def test_watchdog_ramps_to_safe_when_commands_stop(make_rig, test_limits, check_received):
+def test_watchdog_ramps_to_safe_when_commands_stop(make_rig, test_limits, check_received, check_applied):
     rig = make_rig("ascii", seed=3)
     assert rig.run_until(lambda: rig.link.health.state == "running", 2.0)
     rig.link.command(110.0)
@@ -96,25 +99,28 @@ def test_watchdog_ramps_to_safe_when_commands_stop(make_rig, test_limits, check_
     assert rig.run_until(lambda: rig.link.health.watchdog_active and rig.device.received[-1] == test_limits.v_safe
                          and rig.device.plant.u_applied == test_limits.v_safe, 5.0, command=False)
     check_received(rig.device.received, test_limits)
+    check_applied(rig.device, test_limits)
 
 
-def test_shutdown_ramp_and_replug_reseed(make_rig, test_limits, check_received):
+def test_shutdown_ramp_and_replug_reseed(make_rig, test_limits, check_received, check_applied):
     rig = make_rig("gcs", seed=5, command_timeout=10.0)
     assert rig.run_until(lambda: rig.link.health.state == "running", 2.0, command=False)
     rig.link.command(120.0)
     assert rig.run_until(lambda: rig.device.plant.u_applied == 120.0, 5.0, command=False)
     # The amplifier resets to 0 V while unplugged: after the replug the driver must start from 0 V (the
     # device's read-back), not from the 120 V it last sent, and climb at the slew limit.
-    rig.emu.inject("unplug", 0.05)
-    rig.run(0.03, command=False)
+    rig.emu.inject("unplug", 0.5)  # long enough that the reset below happens while unplugged, even when loaded
+    assert rig.run_until(lambda: rig.link.health.disconnects == 1, 5.0, command=False)
     rig.device.v_set = 0.0
     rig.device.plant.reset(0.0)
-    assert rig.run_until(lambda: rig.link.health.connects == 2, 2.0, command=False)
+    a0 = len(rig.device.applied) + 1  # the test's own 120 -> 0 V jump (the emulator may tick once meanwhile)
+    assert rig.run_until(lambda: rig.link.health.connects == 2, 5.0, command=False)
     n0 = len(rig.device.received)
     rig.link.command(120.0)
-    rig.run(0.05, command=False)
+    assert rig.run_until(lambda: len(rig.device.received) > n0, 5.0, command=False)
     assert rig.device.received[n0] <= 10.0 + 20.0 + 1e-6  # limiter re-seeded at 0 V (clamped to v_min 10 V)
-    assert rig.link.ramp_to_safe(1.0)
-    rig.run(0.02, command=False)  # let the emulator read the last line
-    assert rig.device.received[-1] == test_limits.v_safe
+    assert rig.link.ramp_to_safe(5.0)
+    # the emulator reads the last line in its own time
+    assert rig.run_until(lambda: rig.device.received[-1] == test_limits.v_safe, 5.0, command=False)
     check_received(rig.device.received[n0:], test_limits)
+    check_applied(rig.device, test_limits, start=a0)
