@@ -199,6 +199,9 @@ class PtyEmulator:
         self.dt = device.plant.config.dt
         self.injected = {k: 0 for k in FAULTS}
         self.overruns = 0
+        #: Device sample number when the last fault went on the wire (HDB/1 ``seq``): a host that has read a
+        #: sample two later has read the fault too (the link is FIFO), so tests wait for that, not for a time.
+        self.fault_seq = -1
         self._queue: list[tuple[str, float]] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -277,6 +280,7 @@ class PtyEmulator:
             pass  # nobody reads (host disconnected, buffer full): a real device drops it too
 
     def _apply(self, kind: str, duration: float) -> None:
+        self.fault_seq = self.device.seq
         self.injected[kind] += 1
         if kind == "garbage":
             n = self.rng.randrange(1, 64)

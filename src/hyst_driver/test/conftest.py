@@ -37,6 +37,7 @@ class Rig:
         self.link = DeviceLink(SerialTransport(self.emu.link, backoff=(0.005, 0.05)), ad, limits, 1000, **kw)
         self.commands = hostile_commands(seed)
         self.readings = 0
+        self.last_seq: int | None = None  # device sample number of the newest reading (HDB/1)
 
     def run(self, seconds: float, command: bool = True) -> int:
         """Service the link for ``seconds``, answering every reading with the next hostile command."""
@@ -44,8 +45,10 @@ class Rig:
         t_end = time.monotonic() + seconds
         while time.monotonic() < t_end:
             self.link.wait(min(self.link.next_deadline(), t_end) - time.monotonic())
-            for _ in self.link.service():
+            for _, r in self.link.service():
                 n += 1
+                if r.seq is not None:
+                    self.last_seq = r.seq
                 if command:
                     self.link.command(next(self.commands))
         self.readings += n
@@ -58,6 +61,20 @@ class Rig:
             if pred():
                 return True
         return False
+
+    def fault_read(self, n_injected: int, timeout: float = 10.0) -> bool:
+        """Service the link until the host has read past the ``n_injected``-th fault the emulator put on the
+        wire (all kinds counted): an event, not a time. HDB/1: a sample numbered two after the fault (FIFO).
+        GCS (polled, one exchange in flight): two more samples once the fault is out, the second answering a
+        poll sent after it."""
+        if not self.run_until(lambda: sum(self.emu.injected.values()) >= n_injected, timeout):
+            return False
+        if self.link.adapter.streaming:
+            mark = self.emu.fault_seq
+            return self.run_until(lambda: self.last_seq is not None
+                                  and 2 <= (self.last_seq - mark) % 0x10000 < 0x8000, timeout)
+        goal = self.link.health.samples + 2
+        return self.run_until(lambda: self.link.health.samples >= goal, timeout)
 
     def close(self) -> None:
         self.link.close()
