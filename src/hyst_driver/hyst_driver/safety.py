@@ -252,13 +252,15 @@ class VoltageLimiter:
         if not (isinstance(v, (int, float)) and math.isfinite(v)):
             return
         k = round(v / self._limits.quantum)
-        if k != self._base_k:
+        if k == self._base_k:
+            self._odd = None  # an unexplained value must be read twice in a row to be believed
+        else:
             i = next((j for j, (kf, _) in enumerate(self._flight) if kf == k), -1)
             if i >= 0:  # FIFO: every write up to this one has arrived; only this one's value is left of them
                 for _ in range(i + 1):
                     self._flight.popleft()
                 self._base_k, self._odd = k, None
-            elif self._odd == k:  # twice, from two samples: the device really is there (e.g. it reset itself)
+            elif self._odd == k:  # twice in a row: the device really is there (e.g. it reset itself)
                 self._base_k, self._odd = k, None
                 kc = self._clamp_k(k)  # go on from there, as after a reconnect (the old output is history)
                 self._jump = self._jump or kc != k

@@ -256,6 +256,9 @@ def test_a_lost_write_is_forgotten_after_two_later_samples_and_a_device_reset_is
     assert lz.in_flight == () and lz.counts.expired == 1
     lz.observe(0.0, 0.013)                                 # once: a corrupted line is not believed
     assert lz.confirmed == 50.0 and lz.counts.unexplained == 1
+    lz.observe(50.0, 0.0135)                               # nor twice with a good one between
+    lz.observe(0.0, 0.0137)
+    assert lz.confirmed == 50.0 and lz.counts.unexplained == 2
     lz.observe(0.0, 0.014)                                 # twice: the amplifier reset itself to 0 V
     assert lz.confirmed == 0.0 and lz.value == 0.0
     assert lz.update(70.0, 1e-3) == 20.0                   # climbs from there at the slew limit
