@@ -151,7 +151,10 @@ def test_watchdog():
 #: (consuming ``extra`` more setpoints from its input queue than it must), or a read-back reaches the host.
 events = st.lists(st.one_of(
     st.tuples(st.just("write"), requests, st.booleans(), st.floats(0.0, 2e-3)),
+    # bang-bang inside the window (a fraction of it): the requests that keep the slew limit at work
+    st.tuples(st.just("push"), st.one_of(st.sampled_from([0.0, 1.0]), st.floats(0.0, 1.0)), st.floats(0.0, 2e-3)),
     st.tuples(st.just("sample"), st.integers(0, 4), st.floats(0.0, 2e-3)),
+    st.tuples(st.just("sample"), st.just(99), st.floats(0.0, 2e-3)),  # everything on the wire at once
     st.tuples(st.just("readback"), st.floats(0.0, 2e-3)),
 ), min_size=1, max_size=120)
 
@@ -170,8 +173,8 @@ def _device_run(lim: Limits, v0: float, evs) -> tuple[list[float], VoltageLimite
     t = t_write = 0.0
     for ev in evs:
         t += ev[-1]
-        if ev[0] == "write":
-            _, req, watchdog, _ = ev
+        if ev[0] in ("write", "push"):
+            req, watchdog = (ev[1], ev[2]) if ev[0] == "write" else (lim.v_min + ev[1] * (lim.v_max - lim.v_min), False)
             if watchdog:
                 limiter.request_safe()
             else:
@@ -195,13 +198,15 @@ def _device_run(lim: Limits, v0: float, evs) -> tuple[list[float], VoltageLimite
 
 
 @settings(max_examples=400, deadline=None)
-@given(lim=limits(), frac=st.floats(0.0, 1.0), evs=events, flight=st.sampled_from([2e-3, 5e-3, 0.1]))
-def test_applied_voltage_never_steps_more_than_one_sample_of_slew(lim, frac, evs, flight):
+@given(lim=limits(), frac=st.floats(0.0, 1.0), evs=events, flight=st.sampled_from([2e-3, 5e-3, 0.1]),
+       slew=st.one_of(st.none(), st.floats(100.0, 5e4)))
+def test_applied_voltage_never_steps_more_than_one_sample_of_slew(lim, frac, evs, flight, slew):
     """Any interleaving of writes, device samples and read-backs: the voltage the device applies changes by at
-    most ``slew_max · dt_max`` per device sample and stays in the window."""
+    most ``slew_max · dt_max`` per device sample and stays in the window. (``slew``: a slew limit small against
+    the profiles' windows, so that the limit is reached often, not only in corner cases.)"""
     from dataclasses import replace
 
-    lim = replace(lim, flight_max=flight)
+    lim = replace(lim, flight_max=flight, slew_max=lim.slew_max if slew is None else slew)
     applied, _ = _device_run(lim, lim.v_min + frac * (lim.v_max - lim.v_min), evs)
     step = lim.slew_max * lim.dt_max + 1e-9
     for a, b in zip(applied, applied[1:]):
