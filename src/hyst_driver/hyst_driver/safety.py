@@ -65,7 +65,8 @@ class Limits:
         Longest time (s) between writing a setpoint and the device applying it (FIFO link, the device reads its
         input every sample). Only used to forget a write that no read-back ever showed (lost on the wire or
         refused by the device): after two read-backs of samples taken ``flight_max`` after it, it can no longer
-        arrive. Generous, because a write forgotten too early could still arrive.
+        arrive. Generous (1 s: a host stalls for hundreds of ms at load 14), because a write forgotten too early
+        could still arrive, and the only cost of a long one is a slower recovery from a lost write.
     """
 
     v_min: float
@@ -75,7 +76,7 @@ class Limits:
     dt_max: float = 1e-3
     quantum: float = 1e-6
     safe_ramp_rate: float = math.inf
-    flight_max: float = 0.1
+    flight_max: float = 1.0
 
     def __post_init__(self) -> None:
         vals = (self.v_min, self.v_max, self.slew_max, self.v_safe, self.dt_max, self.quantum)
@@ -247,7 +248,8 @@ class VoltageLimiter:
         """A read-back: the device applied ``v`` (V) at its sample taken at ``t_sample`` (s, caller's clock).
 
         ``t_sample`` must not be later than the true sample time by more than a few device samples (a device
-        clock mapped to the host's, or the time the poll that asked for it was sent).
+        clock mapped to the host's, or the time the poll that asked for it was sent); ``-inf`` when unknown
+        (then it forgets nothing).
         """
         if not (isinstance(v, (int, float)) and math.isfinite(v)):
             return

@@ -47,6 +47,15 @@ class DeviceClock:
         self._last_raw: float | None = None
         self._turns = 0
         self._mins: deque[tuple[float, float]] = deque()  # (device time, bound), bounds increasing
+        self._first: float | None = None  # device time of the first sample since the reset
+        self._dev = -math.inf
+
+    @property
+    def settled(self) -> bool:
+        """True once a whole window of device time has been mapped since :meth:`reset`. Before that the offset
+        rests on few arrivals; if they all came late (a busy host after a reconnect), mapped times are late by
+        as much — up to hundreds of ms at load 14 — so nothing that needs an upper bound may use them yet."""
+        return self._first is not None and self._dev - self._first >= self.window
 
     def map(self, device_t: float, host_t: float) -> float:
         """Host time (same clock as ``host_t``) of the sample the device stamped ``device_t``."""
@@ -54,6 +63,9 @@ class DeviceClock:
             self._turns += 1
         self._last_raw = device_t
         dev = device_t + self._turns * self.wrap
+        if self._first is None:
+            self._first = dev
+        self._dev = dev
         bound = host_t - dev
         q = self._mins
         while q and q[-1][1] >= bound:  # monotonic deque: the window minimum is always q[0]
@@ -392,10 +404,17 @@ class DeviceLink:
             h.samples += 1
             t = now if ev.device_time is None else self.device_clock.map(ev.device_time, now)
             out.append((t, ev))
-            # The limiter learns what the amplifier applies, at which device sample: a polled reply was taken
-            # after its poll left (a late reply to the previous poll, at most sample_timeout earlier).
-            self.limiter.observe(ev.applied_v, t if ev.device_time is not None or self.adapter.streaming
-                                 else self._last_poll - self.sample_timeout)
+            # The limiter learns what the amplifier applies, and when the sample was taken (that time only
+            # serves to forget writes no read-back ever showed, so it must never be late): a polled reply was
+            # taken after its poll left (a late reply to the previous poll, at most sample_timeout earlier); a
+            # streamed sample's mapped time is trusted once the device clock has a full window, before that the
+            # sample counts as taken at an unknown time (-inf: it expires nothing). Measured without that rule:
+            # a write forgotten while still in flight after a reconnect at load 14, and a 30.1 V step.
+            if ev.device_time is not None:
+                t_taken = t if self.device_clock.settled else -math.inf
+            else:
+                t_taken = -math.inf if self.adapter.streaming else self._last_poll - self.sample_timeout
+            self.limiter.observe(ev.applied_v, t_taken)
         elif isinstance(ev, BadFrame):
             h.bad_frames[ev.kind] = h.bad_frames.get(ev.kind, 0) + 1
         elif isinstance(ev, DeviceFault):

@@ -264,7 +264,9 @@ def test_node_survives_every_fault_class_and_ramps_to_safe_on_sigint(ctx, emu):
         # printed whatever failed above: the safety verdict of every run (pytest -s) is the measurement
         print(f"\nfault test: max applied step {max_applied_step(emu.device):.6f} V over {len(a)} samples, "
               f"applied in [{min(a[first:]):.6f}, {max(a[first:]):.6f}] V, max received step "
-              f"{max_slew_step(emu.device):.6f} V, load {os.getloadavg()[0]:.1f}")
+              f"{max_slew_step(emu.device):.6f} V, load {os.getloadavg()[0]:.1f}; node: "
+              + " ".join(f"{k}={probe.diag[-1].get(k)}" for k in ("connects", "held", "expired", "unexplained")
+                         if probe.diag))
     assert proc.returncode == 0, err
     assert "ramped to v_safe = 20.0 V" in err
     assert rx[-1] == 20.0, rx[-3:]

@@ -170,3 +170,18 @@ def test_device_clock_follows_a_device_that_lost_time():
     stamps = [c.map((1000 + k) * 1e-3, 50.3 + (1000 + k) * 1e-3 + 3e-4) for k in range(2500)]
     assert stamps[0] < 50.0 + 1.0 + 3e-4 + 1e-9           # within the window the old offset still holds
     assert abs(stamps[-1] - (50.3 + 3.499 + 3e-4)) < 1e-9  # one window later the stamps are right again
+
+
+def test_device_clock_is_settled_only_after_a_full_window_since_reset():
+    """Late first arrivals (a busy host after a reconnect) make the first mapped times late by as much: the
+    limiter may use them to forget writes only once a whole window has been mapped."""
+    from hyst_driver.transport import DeviceClock
+
+    c = DeviceClock(window=1.0)
+    late = [c.map(k * 1e-3, 10.0 + k * 1e-3 + 0.3) for k in range(5)]  # all 0.3 s late: looks like no latency
+    assert not c.settled and late[0] - 10.0 > 0.29                         # the mapping cannot know
+    for k in range(5, 1001):
+        c.map(k * 1e-3, 10.0 + k * 1e-3 + 1e-4)
+    assert c.settled and abs(c.map(1.001, 11.0012) - (10.0 + 1.001 + 1e-4)) < 1e-9
+    c.reset()
+    assert not c.settled
