@@ -202,7 +202,10 @@ class PtyEmulator:
         #: Device sample number when the last fault went on the wire (HDB/1 ``seq``): a host that has read a
         #: sample two later has read the fault too (the link is FIFO), so tests wait for that, not for a time.
         self.fault_seq = -1
-        self._queue: list[tuple[str, float]] = []
+        self._queue: list[tuple[str, float, float | None]] = []
+        #: Index into ``device.applied`` of the first sample after the last power-up reset (``inject(...,
+        #: reset_v=...)``): the jump to the reset voltage is the device's own, not the driver's.
+        self.reset_at = -1
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -249,13 +252,15 @@ class PtyEmulator:
             except OSError:
                 pass
 
-    def inject(self, kind: str, duration: float | None = None) -> None:
-        """Queue one fault (thread-safe); ``duration`` for ``timeout``/``unplug`` (s)."""
+    def inject(self, kind: str, duration: float | None = None, reset_v: float | None = None) -> None:
+        """Queue one fault (thread-safe); ``duration`` for ``timeout``/``unplug`` (s); ``reset_v`` (V, ``unplug``
+        only): the amplifier powers up at this voltage when plugged back in (reset in the emulator's own thread,
+        so it cannot race a sample)."""
         if kind not in FAULTS:
             raise ValueError(f"unknown fault {kind!r}")
         with self._lock:
             self._queue.append((kind, duration if duration is not None else
-                                (self.unplug_s if kind == "unplug" else self.timeout_s)))
+                                (self.unplug_s if kind == "unplug" else self.timeout_s), reset_v))
 
     def __enter__(self) -> "PtyEmulator":
         return self.start()
@@ -279,7 +284,7 @@ class PtyEmulator:
         except (BlockingIOError, OSError):
             pass  # nobody reads (host disconnected, buffer full): a real device drops it too
 
-    def _apply(self, kind: str, duration: float) -> None:
+    def _apply(self, kind: str, duration: float, reset_v: float | None = None) -> None:
         self.fault_seq = self.device.seq
         self.injected[kind] += 1
         if kind == "garbage":
@@ -297,6 +302,10 @@ class PtyEmulator:
         elif kind == "unplug":
             self._unplug()
             self._stop.wait(duration)
+            if reset_v is not None:  # powered up again at reset_v, before the host can see the port
+                self.device.v_set = reset_v
+                self.device.plant.reset(reset_v)
+                self.reset_at = len(self.device.applied)
             if not self._stop.is_set():
                 self._plug()
 
@@ -313,8 +322,8 @@ class PtyEmulator:
         while not self._stop.is_set():
             with self._lock:
                 queued, self._queue = self._queue, []
-            for kind, duration in queued:
-                self._apply(kind, duration)
+            for kind, duration, reset_v in queued:
+                self._apply(kind, duration, reset_v)
             now = time.monotonic()
             timeout = max(0.0, next_tick - now)
             try:

@@ -203,7 +203,10 @@ class VoltageLimiter:
         """
         self._k = self._clamp_k(self._to_k(v))
         self._target_k = self._k
-        self._reset_flight(self._to_k(v))
+        # the reported value itself, not _to_k's overflow guard (which clamps to v_min - 1: a device at 0 V under
+        # v_min = 10 V was taken to be at 9 V, and a 29 V first step passed)
+        finite = isinstance(v, (int, float)) and math.isfinite(v)
+        self._reset_flight(round(v / self._limits.quantum) if finite else self._k)
         if self._base_k != self._k:  # reported outside the window: moving into it beats the slew limit
             self._jump = True
 
@@ -337,7 +340,9 @@ class VoltageLimiter:
             return self.value
         lo, hi = self._envelope()
         lo, hi = max(lo, lim.lo_q, self._k - max_dk), min(hi, lim.hi_q, self._k + max_dk)
-        if len(self._flight) >= self.FLIGHT_MAX_LEN or lo > hi:
+        # An unexplained read-back pending: the amplifier may have reset itself with the link up; until a second
+        # read-back settles it, even a keepalive of the old setpoint could be a full-window step.
+        if len(self._flight) >= self.FLIGHT_MAX_LEN or lo > hi or self._odd is not None:
             self.hold = True  # nothing admissible until the device confirms more: write nothing
             self.counts.held += 1
             return self.value

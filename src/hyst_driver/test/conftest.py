@@ -112,8 +112,10 @@ def assert_applied_within(device, limits: Limits, start: int = 0) -> None:
     a = device.applied[start:]
     assert len(a) > 1, "the device took no samples"
     step = limits.slew_max * limits.dt_max + 1e-6
-    worst = max(abs(a[k] - a[k - 1]) for k in range(1, len(a)))
-    assert worst <= step, f"the applied voltage stepped {worst} V in one device sample > {step} V"
+    worst, at = max((abs(a[k] - a[k - 1]), k) for k in range(1, len(a)))
+    assert worst <= step, (f"the applied voltage stepped {worst} V in one device sample > {step} V: sample "
+                           f"{start + at} of {start + len(a)}, {list(a[max(0, at - 4):at + 3])}; first received "
+                           f"{device.received[:4]}")
     moved = next((k for k in range(len(a)) if a[k] != a[0]), len(a))
     if moved < len(a):
         lo, hi = min(a[moved:]), max(a[moved:])

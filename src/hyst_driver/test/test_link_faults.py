@@ -7,7 +7,7 @@ the limits is the voltage the emulated amplifier applied at each of its samples.
 
 Nothing here waits a fixed time and then asserts: every wait is for an event (the emulator put the fault on the
 wire, the host read past it, a counter moved) with a generous deadline, so a loaded machine (load ≈ 9) only
-makes the tests slower. What a stalled host legitimately causes (a timeout, a reconnect) is tolerated up to 5 %.
+makes the tests slower. What a stalled host legitimately causes (a timeout, a reconnect) is tolerated up to 10 %.
 """
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ def test_frame_faults_100_runs(make_rig, check_received, check_applied, test_lim
     assert rig.emu.injected[fault] == RUNS
     # A frame fault must not cost the connection; a loaded host stalling this process for longer than
     # link_timeout may, rarely — a driver that reconnects on bad frames would show ~RUNS here.
-    assert h.disconnects <= 0.05 * RUNS, f"{fault} costs the connection: {rig.link.snapshot()}"
+    assert h.disconnects <= 0.1 * RUNS, f"{fault} costs the connection: {rig.link.snapshot()}"
     if protocol == "ascii" and fault != "garbage":
         # HDB/1 catches every corrupted or truncated frame (CRC-8, sequence numbers).
         assert noticed == RUNS, noticed
@@ -78,7 +78,8 @@ def test_timeouts_100_runs(make_rig, check_received, check_applied, test_limits,
         short_drops += (not long) and h.disconnects > d0
     # Exact counts would test the host's scheduler: a stall of this process may add a timeout (123 for 100
     # silences at load 10) or a reconnect. A driver counting every missing sample would show ~40 per silence.
-    assert h.timeouts <= 2 * RUNS and short_drops <= 0.05 * RUNS, (h.timeouts, short_drops)
+    # (short drops: 8 of 90 at load 14, a stalled host reads nothing for longer than link_timeout)
+    assert h.timeouts <= 2 * RUNS and short_drops <= 0.1 * RUNS, (h.timeouts, short_drops)
     check_received(rig.device.received, test_limits)
     check_applied(rig.device, test_limits)
 
@@ -99,7 +100,7 @@ def test_unplug_and_replug_100_runs(make_rig, check_received, check_applied, tes
             f"run {i}: no reconnect: {rig.link.snapshot()}"
         assert _recovered(rig, h.samples)
     assert rig.emu.injected["unplug"] == runs
-    assert runs <= h.disconnects <= runs + 0.05 * runs, h.disconnects  # a stalled host may add a few
+    assert runs <= h.disconnects <= runs + 0.1 * runs, h.disconnects  # a stalled host may add a few (110 at load 14)
     check_received(rig.device.received, test_limits)
     check_applied(rig.device, test_limits)
 
@@ -128,12 +129,11 @@ def test_shutdown_ramp_and_replug_reseed(make_rig, test_limits, check_received, 
     assert rig.run_until(lambda: rig.device.plant.u_applied == 120.0, DEADLINE, command=False)
     # The amplifier resets to 0 V while unplugged: after the replug the driver must start from 0 V (the
     # device's read-back), not from the 120 V it last sent, and climb at the slew limit.
-    rig.emu.inject("unplug", 0.5)  # long enough that the reset below happens while unplugged, even when loaded
-    assert rig.run_until(lambda: rig.link.health.disconnects == 1, DEADLINE, command=False)
-    rig.device.v_set = 0.0
-    rig.device.plant.reset(0.0)
-    a0 = len(rig.device.applied) + 1  # the test's own 120 -> 0 V jump (the emulator may tick once meanwhile)
+    # (reset by the emulator's own thread while unplugged: a reset from this thread raced a sample at load 14)
+    rig.emu.inject("unplug", 0.05, reset_v=0.0)
     assert rig.run_until(lambda: rig.link.health.connects == 2, DEADLINE, command=False)
+    a0 = rig.emu.reset_at  # the device's own 120 -> 0 V jump is not the driver's
+    assert a0 >= 0
     n0 = len(rig.device.received)
     rig.link.command(120.0)
     assert rig.run_until(lambda: len(rig.device.received) > n0, DEADLINE, command=False)

@@ -261,9 +261,22 @@ def test_a_lost_write_is_forgotten_after_two_later_samples_and_a_device_reset_is
     assert lz.in_flight == () and lz.counts.expired == 1
     lz.observe(0.0, 0.013)                                 # once: a corrupted line is not believed
     assert lz.confirmed == 50.0 and lz.counts.unexplained == 1
+    assert lz.step(1e-3) == 70.0 and lz.hold               # nothing is written until it is settled
     lz.observe(50.0, 0.0135)                               # nor twice with a good one between
     lz.observe(0.0, 0.0137)
     assert lz.confirmed == 50.0 and lz.counts.unexplained == 2
     lz.observe(0.0, 0.014)                                 # twice: the amplifier reset itself to 0 V
     assert lz.confirmed == 0.0 and lz.value == 0.0
     assert lz.update(70.0, 1e-3) == 20.0                   # climbs from there at the slew limit
+
+
+def test_seeded_outside_the_window_the_first_steps_are_judged_from_the_reported_voltage():
+    """A device at 0 V under v_min = 10 V (seen at load: a 29 V first step when the seed was clamped to 9 V)."""
+    lz = VoltageLimiter(Limits(10.0, 120.0, slew_max=2e4, v_safe=20.0, dt_max=1e-3))
+    lz.reset(0.0)
+    assert lz.confirmed == 0.0
+    out = []
+    for t in range(1, 5):  # none of them confirmed: all may reach the device within one of its samples
+        out.append(lz.update(110.0, 1e-3))
+        lz.sent(t * 1e-3)
+    assert out[0] == 10.0 and max(out) <= 20.0  # into the window at once, then within 20 V of the 0 V applied
