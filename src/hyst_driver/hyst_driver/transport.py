@@ -383,6 +383,13 @@ class DeviceLink:
             self._last_rx, self._in_timeout = now, False
             h.applied_v = ev.applied_v
             if h.state == "handshake" and not self._seeded:
+                if not h.identity:
+                    # Produced before the device read the handshake (a stream still running from the last
+                    # connection): a setpoint written before the link dropped may still be ahead of the
+                    # handshake in the FIFO and be applied after these samples. The identify reply comes after
+                    # the device has read all of it (measured at load 10: seeded from two such samples, the
+                    # first write was judged from a voltage the amplifier had already left, a 21.1 V step).
+                    return
                 # Start from what the amplifier applies now (after a replug it may have reset to 0 V); two
                 # agreeing read-backs, so one corrupted line of an unchecked protocol cannot seed the limiter.
                 # With sample numbers they must come from different device samples: a setpoint that arrived
