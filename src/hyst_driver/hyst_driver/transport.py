@@ -194,6 +194,7 @@ class LinkHealth:
     clipped: int = 0
     rejected: int = 0
     slew_limited: int = 0
+    late_commands: int = 0
     held: int = 0
     expired: int = 0
     unexplained: int = 0
@@ -235,6 +236,8 @@ class DeviceLink:
         self.clock = clock
         self.health = LinkHealth()
         self._pending_cmd: tuple[float, float] | None = None
+        #: Set by :meth:`ramp_to_safe`: commands from then on are counted and never written.
+        self.closing = False
         self._pending_limits: Limits | None = None
         self._last_write = -math.inf
         self._last_poll = -math.inf
@@ -257,6 +260,9 @@ class DeviceLink:
         thread (one thread hop less in the 1 kHz loop); otherwise it waits for the link to come up."""
         now = self.clock() if now is None else now
         with self._lock:
+            if self.closing:  # the shutdown ramp owns the output (a late command landed after it at load 11)
+                self.health.late_commands += 1
+                return
             if self.health.state == "running" and self._pending_limits is None:
                 self.watchdog.feed(now)
                 self.limiter.request(volts)
@@ -480,6 +486,8 @@ class DeviceLink:
 
         Returns True when ``v_safe`` was written, False when the link was down or the time ran out.
         """
+        with self._lock:
+            self.closing = True
         self.watchdog.timeout = -1.0  # expired from now on: target is v_safe
         t_end = self.clock() + max_seconds
         while self.clock() < t_end:

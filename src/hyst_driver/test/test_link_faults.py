@@ -143,3 +143,16 @@ def test_shutdown_ramp_and_replug_reseed(make_rig, test_limits, check_received, 
     assert rig.run_until(lambda: rig.device.received[-1] == test_limits.v_safe, DEADLINE, command=False)
     check_received(rig.device.received[n0:], test_limits)
     check_applied(rig.device, test_limits, start=a0)
+
+
+def test_commands_after_the_shutdown_ramp_began_are_never_written(make_rig, test_limits):
+    """The node's executor may deliver a queued command while the main thread ramps down: it must not land."""
+    rig = make_rig("ascii", seed=4)
+    assert rig.run_until(lambda: rig.link.health.state == "running", DEADLINE, command=False)
+    assert rig.link.ramp_to_safe(5.0)
+    n = len(rig.device.received)
+    rig.link.command(84.0)
+    assert rig.link.health.late_commands == 1 and rig.link.health.writes == rig.link.snapshot().writes
+    assert rig.run_until(lambda: rig.device.received[-1] == test_limits.v_safe and len(rig.device.received) >= n,
+                         DEADLINE, command=False)
+    assert 84.0 not in rig.device.received[n:]
