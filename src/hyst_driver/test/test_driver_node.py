@@ -217,7 +217,15 @@ def test_slew_check_judges_steps_across_a_reconnect_from_the_applied_voltage():
 def test_node_survives_every_fault_class_and_ramps_to_safe_on_sigint(ctx, emu):
     """Each fault class 100 times into one running node: after every fault samples flow again (the node stays
     up and reconnects after each unplug), the faults are counted on /diagnostics, and no voltage outside the
-    limits or faster than the slew limit ever reaches the device, while the command stream is hostile."""
+    limits or faster than the slew limit ever reaches the device, while the command stream is hostile. The
+    slew limit is judged against the voltage the amplifier applied at each of its samples.
+
+    Measured with three CPU hogs beside it (load 8.5-13.7 on 2 cores; ``pytest -s`` prints the verdict line):
+    before the in-flight envelope, a 100 V applied step (38.3 V between consecutive writes); with it, 14 of 14
+    runs (commit 3623da3; 1.24 M device samples, 104-126 reconnects a run) max applied step 20.000000 V, applied
+    voltage in [10, 120] V. Three of those runs failed elsewhere: one unplug of 100 not recovered within 20 s,
+    the shutdown race fixed after (6bdd3bc), and one shutdown ramp not confirmed within its time.
+    """
     runs = 100
     proc = subprocess.Popen(_node_cmd("-p", f"port:={emu.link}", "-p", "v_min:=10.0", "-p", "v_max:=120.0",
                                       "-p", "slew_max:=20000.0", "-p", "v_safe:=20.0", "-p", "link_timeout:=0.2",
