@@ -272,6 +272,7 @@ class DriverNode(Node):
               "last_device_error": h.last_device_error, "last_link_error": h.last_link_error,
               "writes": h.writes, "commanded_v": h.commanded_v, "applied_v": h.applied_v,
               "clipped": h.clipped, "rejected": h.rejected, "slew_limited": h.slew_limited,
+              "held": h.held, "expired": h.expired, "unexplained": h.unexplained,
               "watchdog_active": h.watchdog_active, "bad_commands": self.bad_commands, "io_errors": self.io_errors,
               "v_min": self.cfg.v_min, "v_max": self.cfg.v_max, "v_safe": self.cfg.v_safe,
               "scheduling": str(self.scheduling)}

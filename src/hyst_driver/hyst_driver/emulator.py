@@ -23,6 +23,7 @@ import tempfile
 import threading
 import time
 import tty
+from array import array
 from dataclasses import dataclass
 
 from hyst_common.runtime import set_realtime
@@ -68,6 +69,10 @@ class EmulatedDevice:
         #: from the applied voltage, so across a handshake the step is judged from there.
         self.applied_at_receipt: list[float] = []
         self.identified_at: list[int] = []
+        #: The voltage the amplifier applied at every device sample (V), in sample order: the judge of the slew
+        #: and range limits (two commands delivered within one sample show here as one step, the one the stage
+        #: feels; in ``received`` they look like two small ones). 8 bytes a sample: 3.6 MB per hour at 1 kHz.
+        self.applied = array("d")
         self.bad_lines = 0
         self._tick_us = round(cfg.dt * 1e6)
 
@@ -76,6 +81,7 @@ class EmulatedDevice:
         """Advance one sample; return a ``P`` frame when streaming (and ``emit``), else nothing."""
         r = self.plant.step(self.v_set)
         self.y = r.y
+        self.applied.append(r.u_applied)
         self.seq = (self.seq + 1) & 0xFFFF
         self.t_us = (self.t_us + self._tick_us) & 0xFFFFFFFF
         return self._sample() if self.streaming and emit else b""
@@ -193,7 +199,13 @@ class PtyEmulator:
         self.dt = device.plant.config.dt
         self.injected = {k: 0 for k in FAULTS}
         self.overruns = 0
-        self._queue: list[tuple[str, float]] = []
+        #: Device sample number when the last fault went on the wire (HDB/1 ``seq``): a host that has read a
+        #: sample two later has read the fault too (the link is FIFO), so tests wait for that, not for a time.
+        self.fault_seq = -1
+        self._queue: list[tuple[str, float, float | None]] = []
+        #: Index into ``device.applied`` of the first sample after the last power-up reset (``inject(...,
+        #: reset_v=...)``): the jump to the reset voltage is the device's own, not the driver's.
+        self.reset_at = -1
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -240,13 +252,15 @@ class PtyEmulator:
             except OSError:
                 pass
 
-    def inject(self, kind: str, duration: float | None = None) -> None:
-        """Queue one fault (thread-safe); ``duration`` for ``timeout``/``unplug`` (s)."""
+    def inject(self, kind: str, duration: float | None = None, reset_v: float | None = None) -> None:
+        """Queue one fault (thread-safe); ``duration`` for ``timeout``/``unplug`` (s); ``reset_v`` (V, ``unplug``
+        only): the amplifier powers up at this voltage when plugged back in (reset in the emulator's own thread,
+        so it cannot race a sample)."""
         if kind not in FAULTS:
             raise ValueError(f"unknown fault {kind!r}")
         with self._lock:
             self._queue.append((kind, duration if duration is not None else
-                                (self.unplug_s if kind == "unplug" else self.timeout_s)))
+                                (self.unplug_s if kind == "unplug" else self.timeout_s), reset_v))
 
     def __enter__(self) -> "PtyEmulator":
         return self.start()
@@ -270,7 +284,8 @@ class PtyEmulator:
         except (BlockingIOError, OSError):
             pass  # nobody reads (host disconnected, buffer full): a real device drops it too
 
-    def _apply(self, kind: str, duration: float) -> None:
+    def _apply(self, kind: str, duration: float, reset_v: float | None = None) -> None:
+        self.fault_seq = self.device.seq
         self.injected[kind] += 1
         if kind == "garbage":
             n = self.rng.randrange(1, 64)
@@ -287,6 +302,10 @@ class PtyEmulator:
         elif kind == "unplug":
             self._unplug()
             self._stop.wait(duration)
+            if reset_v is not None:  # powered up again at reset_v, before the host can see the port
+                self.device.v_set = reset_v
+                self.device.plant.reset(reset_v)
+                self.reset_at = len(self.device.applied)
             if not self._stop.is_set():
                 self._plug()
 
@@ -303,8 +322,8 @@ class PtyEmulator:
         while not self._stop.is_set():
             with self._lock:
                 queued, self._queue = self._queue, []
-            for kind, duration in queued:
-                self._apply(kind, duration)
+            for kind, duration, reset_v in queued:
+                self._apply(kind, duration, reset_v)
             now = time.monotonic()
             timeout = max(0.0, next_tick - now)
             try:

@@ -13,10 +13,28 @@ Pure (no I/O, no clock): callers pass time steps. Invariants, proven by the prop
 
 When the limits change so that the present output falls outside the new window, the output moves into the
 window at once (invariant 1 wins over 2).
+
+Invariant 2 bounds consecutive *writes*; the amplifier, though, applies the last setpoint it has received at
+each of its own samples, so two writes delivered within one device sample make one double step (measured: 20.4–
+26.5 V against a 20 V-per-sample limit with three CPU hogs beside the driver). A host clock cannot prevent that;
+the device's read-back can. The limiter therefore also keeps the **in-flight envelope** (:meth:`sent`,
+:meth:`observe`): the set of voltages the device may be applying now or at any later sample — the last
+confirmed read-back and every write not yet shown superseded — and each write must lie within
+``slew_max · dt_max`` (one device sample) of *every* member. Property (``test_safety.py``, any interleaving of
+writes, device samples and read-backs):
+
+4. the voltage the device applies never changes by more than ``slew_max · dt_max`` between two of its samples
+   and never leaves ``[v_min, v_max]`` (once the first write is applied).
+
+A read-back of value ``v`` proves that the device received every write up to the first in-flight one equal to
+``v`` (the link is FIFO and the device applies the last one received), so those leave the set. When nothing
+admissible is left (the device lags behind), the limiter *holds*: :attr:`VoltageLimiter.hold` is True and nothing
+may be written until a read-back narrows the set, which paces writes to the device's own samples.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -43,6 +61,12 @@ class Limits:
         Wire resolution (V); outputs are multiples of it.
     safe_ramp_rate : float
         Rate (V/s) of ramps to ``v_safe`` (watchdog, shutdown), never above ``slew_max``; ``inf`` = ``slew_max``.
+    flight_max : float
+        Longest time (s) between writing a setpoint and the device applying it (FIFO link, the device reads its
+        input every sample). Only used to forget a write that no read-back ever showed (lost on the wire or
+        refused by the device): after two read-backs of samples taken ``flight_max`` after it, it can no longer
+        arrive. Generous (1 s: a host stalls for hundreds of ms at load 14), because a write forgotten too early
+        could still arrive, and the only cost of a long one is a slower recovery from a lost write.
     """
 
     v_min: float
@@ -52,6 +76,7 @@ class Limits:
     dt_max: float = 1e-3
     quantum: float = 1e-6
     safe_ramp_rate: float = math.inf
+    flight_max: float = 1.0
 
     def __post_init__(self) -> None:
         vals = (self.v_min, self.v_max, self.slew_max, self.v_safe, self.dt_max, self.quantum)
@@ -63,6 +88,8 @@ class Limits:
             raise ConfigError(f"v_safe ({self.v_safe} V) must lie in [v_min, v_max] = [{self.v_min}, {self.v_max}] V")
         if not self.slew_max > 0 or not self.dt_max > 0 or not self.quantum > 0:
             raise ConfigError("slew_max, dt_max and quantum must be positive")
+        if not (isinstance(self.flight_max, (int, float)) and self.flight_max > 0):
+            raise ConfigError(f"flight_max must be positive, got {self.flight_max}")
         if not self.safe_ramp_rate > 0:
             raise ConfigError(f"safe_ramp_rate must be positive (inf = slew_max), got {self.safe_ramp_rate}")
         if self.hi_q < self.lo_q:
@@ -99,6 +126,12 @@ class LimiterCounts:
     clipped: int = 0
     rejected: int = 0
     slew_limited: int = 0
+    held: int = 0
+    """Steps that found no admissible voltage (the device had not yet confirmed enough): nothing written."""
+    expired: int = 0
+    """In-flight writes forgotten after ``flight_max`` without a read-back showing them (lost or refused)."""
+    unexplained: int = 0
+    """Read-backs outside every voltage the limiter sent or saw confirmed (a device reset, a corrupted line)."""
 
 
 class VoltageLimiter:
@@ -109,17 +142,28 @@ class VoltageLimiter:
     limits : Limits
     v0 : float, optional
         Present output (e.g. the voltage the device reports after connecting); ``v_safe`` if omitted.
+    track_flight : bool
+        Keep the in-flight envelope (invariant 4; the caller reports writes with :meth:`sent` and read-backs
+        with :meth:`observe`). False: every output counts as applied the moment it is computed (a plant stepped
+        in the same thread; the tests of invariants 1–3 alone).
     """
 
     #: Longest time step (s) credited to a ramp to ``v_safe`` (keeps a stalled host from licensing a jump).
     RAMP_DT_MAX = 0.1
 
-    def __init__(self, limits: Limits, v0: float | None = None) -> None:
+    #: Most writes kept in flight; beyond it the limiter holds (a device that confirms nothing gets nothing new).
+    FLIGHT_MAX_LEN = 256
+
+    def __init__(self, limits: Limits, v0: float | None = None, *, track_flight: bool = True) -> None:
         self._limits = limits
         self._k = self._clamp_k(self._to_k(limits.v_safe if v0 is None else v0))
         self._target_k = self._k
         self._safe = False
         self.counts = LimiterCounts()
+        #: True when the last :meth:`step` found no admissible voltage: the caller must not write.
+        self.hold = False
+        self.track_flight = track_flight
+        self._reset_flight(self._k)
 
     # ------------------------------------------------------------ state
     @property
@@ -154,16 +198,99 @@ class VoltageLimiter:
         """Re-seed the output with what the device actually applies (after a (re)connect).
 
         Non-finite ``v`` seeds ``v_safe``; values outside the window are brought inside it. The target becomes
-        the output, so nothing moves until the next request.
+        the output, so nothing moves until the next request. The in-flight envelope restarts from ``v`` as the
+        device reported it (not clamped: the first write is judged from where the amplifier really is).
         """
         self._k = self._clamp_k(self._to_k(v))
         self._target_k = self._k
+        # the reported value itself, not _to_k's overflow guard (which clamps to v_min - 1: a device at 0 V under
+        # v_min = 10 V was taken to be at 9 V, and a 29 V first step passed)
+        finite = isinstance(v, (int, float)) and math.isfinite(v)
+        self._reset_flight(round(v / self._limits.quantum) if finite else self._k)
+        if self._base_k != self._k:  # reported outside the window: moving into it beats the slew limit
+            self._jump = True
 
     def set_limits(self, limits: Limits) -> None:
         """Swap the limits; output and target are brought into the new window at once."""
         self._limits = limits
-        self._k = self._clamp_k(self._k)
+        k = self._clamp_k(self._k)
+        self._jump = self._jump or k != self._k  # invariant 1 wins: the next write may leave the envelope
+        self._k = k
         self._target_k = self._clamp_k(self._target_k)
+
+    # ------------------------------------------------------------ in-flight envelope
+    def _reset_flight(self, k: int) -> None:
+        self._base_k = k                                   # last confirmed applied voltage (grid index)
+        self._flight: deque[list] = deque()                # [grid index, write time], oldest first
+        self._obs_t = -math.inf                            # sample time of the previous read-back
+        self._odd: int | None = None                       # last unexplained read-back, awaiting a second
+        self._jump = False
+
+    @property
+    def in_flight(self) -> tuple[float, ...]:
+        """Voltages written that no read-back has yet shown superseded (V), oldest first."""
+        return tuple(self._limits.to_volts(k) for k, _ in self._flight)
+
+    @property
+    def confirmed(self) -> float:
+        """Last applied voltage a read-back confirmed (V)."""
+        return self._limits.to_volts(self._base_k)
+
+    def sent(self, t: float) -> None:
+        """The present output is being written at time ``t`` (s, the caller's monotonic clock).
+
+        Call it *before* the bytes go out: a write that fails half-way may still have reached the device.
+        """
+        self._jump = False
+        if self._flight and self._flight[-1][0] == self._k:
+            self._flight[-1][1] = t  # the same voltage again (keepalive): one member, the later time
+        elif self._flight or self._k != self._base_k:
+            self._flight.append([self._k, t])
+
+    def observe(self, v: float, t_sample: float) -> None:
+        """A read-back: the device applied ``v`` (V) at its sample taken at ``t_sample`` (s, caller's clock).
+
+        ``t_sample`` must not be later than the true sample time by more than a few device samples (a device
+        clock mapped to the host's, or the time the poll that asked for it was sent); ``-inf`` when unknown
+        (then it forgets nothing).
+        """
+        if not (isinstance(v, (int, float)) and math.isfinite(v)):
+            return
+        k = round(v / self._limits.quantum)
+        if k == self._base_k:
+            self._odd = None  # an unexplained value must be read twice in a row to be believed
+        else:
+            i = next((j for j, (kf, _) in enumerate(self._flight) if kf == k), -1)
+            if i >= 0:  # FIFO: every write up to this one has arrived; only this one's value is left of them
+                for _ in range(i + 1):
+                    self._flight.popleft()
+                self._base_k, self._odd = k, None
+            elif self._odd == k:  # twice in a row: the device really is there (e.g. it reset itself)
+                self._base_k, self._odd = k, None
+                kc = self._clamp_k(k)  # go on from there, as after a reconnect (the old output is history)
+                self._jump = self._jump or kc != k
+                self._k = kc
+            else:
+                self.counts.unexplained += 1
+                self._odd = k
+        # Two read-backs of samples taken flight_max after a write: it has arrived and been superseded or
+        # refused; it can no longer be applied (two, because a polled device may answer just before its next
+        # sample applies what it has received).
+        cutoff = min(self._obs_t, t_sample) - self._limits.flight_max
+        while self._flight and self._flight[0][1] <= cutoff:
+            self._flight.popleft()
+            self.counts.expired += 1
+        self._obs_t = max(self._obs_t, t_sample)
+
+    def _envelope(self) -> tuple[int, int]:
+        """Grid indices admissible for the next write: within one device sample's slew of every voltage the
+        device may be applying (empty when lo > hi)."""
+        lo = hi = self._base_k
+        for kf, _ in self._flight:
+            lo, hi = min(lo, kf), max(hi, kf)
+        lim = self._limits
+        step = math.floor(lim.slew_max * lim.dt_max / lim.quantum)
+        return hi - step, lo + step
 
     # ------------------------------------------------------------ requests
     def request(self, v: float) -> bool:
@@ -187,7 +314,9 @@ class VoltageLimiter:
         self._safe = True
 
     def step(self, dt: float) -> float:
-        """Advance the output toward the target by at most ``slew_max · min(dt, dt_max)``; return it (V).
+        """Advance the output toward the target by at most ``slew_max · min(dt, dt_max)``, within the in-flight
+        envelope; return it (V). When no voltage is admissible :attr:`hold` becomes True, the output stays and
+        must not be written (until a read-back arrives: :meth:`observe`).
 
         A non-finite or negative ``dt`` counts as zero (the output holds).
         """
@@ -202,7 +331,22 @@ class VoltageLimiter:
         if abs(dk) > max_dk:
             self.counts.slew_limited += 1
             dk = max_dk if dk > 0 else -max_dk
-        self._k = self._clamp_k(self._k + dk)
+        k = self._clamp_k(self._k + dk)
+        self.hold = False
+        if not self.track_flight:
+            self._k = k
+            return self.value
+        if self._jump:  # the window moved past the output: write the output brought into it (invariant 1 wins)
+            return self.value
+        lo, hi = self._envelope()
+        lo, hi = max(lo, lim.lo_q, self._k - max_dk), min(hi, lim.hi_q, self._k + max_dk)
+        # An unexplained read-back pending: the amplifier may have reset itself with the link up; until a second
+        # read-back settles it, even a keepalive of the old setpoint could be a full-window step.
+        if len(self._flight) >= self.FLIGHT_MAX_LEN or lo > hi or self._odd is not None:
+            self.hold = True  # nothing admissible until the device confirms more: write nothing
+            self.counts.held += 1
+            return self.value
+        self._k = min(max(k, lo), hi)
         return self.value
 
     def update(self, v: float, dt: float) -> float:

@@ -47,6 +47,15 @@ class DeviceClock:
         self._last_raw: float | None = None
         self._turns = 0
         self._mins: deque[tuple[float, float]] = deque()  # (device time, bound), bounds increasing
+        self._first: float | None = None  # device time of the first sample since the reset
+        self._dev = -math.inf
+
+    @property
+    def settled(self) -> bool:
+        """True once a whole window of device time has been mapped since :meth:`reset`. Before that the offset
+        rests on few arrivals; if they all came late (a busy host after a reconnect), mapped times are late by
+        as much — up to hundreds of ms at load 14 — so nothing that needs an upper bound may use them yet."""
+        return self._first is not None and self._dev - self._first >= self.window
 
     def map(self, device_t: float, host_t: float) -> float:
         """Host time (same clock as ``host_t``) of the sample the device stamped ``device_t``."""
@@ -54,6 +63,9 @@ class DeviceClock:
             self._turns += 1
         self._last_raw = device_t
         dev = device_t + self._turns * self.wrap
+        if self._first is None:
+            self._first = dev
+        self._dev = dev
         bound = host_t - dev
         q = self._mins
         while q and q[-1][1] >= bound:  # monotonic deque: the window minimum is always q[0]
@@ -182,6 +194,10 @@ class LinkHealth:
     clipped: int = 0
     rejected: int = 0
     slew_limited: int = 0
+    late_commands: int = 0
+    held: int = 0
+    expired: int = 0
+    unexplained: int = 0
 
 
 class DeviceLink:
@@ -220,6 +236,8 @@ class DeviceLink:
         self.clock = clock
         self.health = LinkHealth()
         self._pending_cmd: tuple[float, float] | None = None
+        #: Set by :meth:`ramp_to_safe`: commands from then on are counted and never written.
+        self.closing = False
         self._pending_limits: Limits | None = None
         self._last_write = -math.inf
         self._last_poll = -math.inf
@@ -242,6 +260,9 @@ class DeviceLink:
         thread (one thread hop less in the 1 kHz loop); otherwise it waits for the link to come up."""
         now = self.clock() if now is None else now
         with self._lock:
+            if self.closing:  # the shutdown ramp owns the output (a late command landed after it at load 11)
+                self.health.late_commands += 1
+                return
             if self.health.state == "running" and self._pending_limits is None:
                 self.watchdog.feed(now)
                 self.limiter.request(volts)
@@ -302,7 +323,8 @@ class DeviceLink:
         """A copy of the health record, limiter counts included."""
         c = self.limiter.counts
         return replace(self.health, bad_frames=dict(self.health.bad_frames), clipped=c.clipped,
-                       rejected=c.rejected, slew_limited=c.slew_limited)
+                       rejected=c.rejected, slew_limited=c.slew_limited, held=c.held, expired=c.expired,
+                       unexplained=c.unexplained)
 
     def service(self, now: float | None = None) -> list[tuple[float, Reading]]:
         """Do everything that is due; return ``(sample_time, reading)`` pairs (sample time on :attr:`clock`:
@@ -367,6 +389,13 @@ class DeviceLink:
             self._last_rx, self._in_timeout = now, False
             h.applied_v = ev.applied_v
             if h.state == "handshake" and not self._seeded:
+                if not h.identity:
+                    # Produced before the device read the handshake (a stream still running from the last
+                    # connection): a setpoint written before the link dropped may still be ahead of the
+                    # handshake in the FIFO and be applied after these samples. The identify reply comes after
+                    # the device has read all of it (measured at load 10: seeded from two such samples, the
+                    # first write was judged from a voltage the amplifier had already left, a 21.1 V step).
+                    return
                 # Start from what the amplifier applies now (after a replug it may have reset to 0 V); two
                 # agreeing read-backs, so one corrupted line of an unchecked protocol cannot seed the limiter.
                 # With sample numbers they must come from different device samples: a setpoint that arrived
@@ -386,7 +415,19 @@ class DeviceLink:
                     self.transport.write(self.adapter.read_once())  # still moving (or corrupted): read again
                 return
             h.samples += 1
-            out.append((now if ev.device_time is None else self.device_clock.map(ev.device_time, now), ev))
+            t = now if ev.device_time is None else self.device_clock.map(ev.device_time, now)
+            out.append((t, ev))
+            # The limiter learns what the amplifier applies, and when the sample was taken (that time only
+            # serves to forget writes no read-back ever showed, so it must never be late): a polled reply was
+            # taken after its poll left (a late reply to the previous poll, at most sample_timeout earlier); a
+            # streamed sample's mapped time is trusted once the device clock has a full window, before that the
+            # sample counts as taken at an unknown time (-inf: it expires nothing). Measured without that rule:
+            # a write forgotten while still in flight after a reconnect at load 14, and a 30.1 V step.
+            if ev.device_time is not None:
+                t_taken = t if self.device_clock.settled else -math.inf
+            else:
+                t_taken = -math.inf if self.adapter.streaming else self._last_poll - self.sample_timeout
+            self.limiter.observe(ev.applied_v, t_taken)
         elif isinstance(ev, BadFrame):
             h.bad_frames[ev.kind] = h.bad_frames.get(ev.kind, 0) + 1
         elif isinstance(ev, DeviceFault):
@@ -398,11 +439,14 @@ class DeviceLink:
 
     def _write_voltage(self, now: float) -> None:
         v = self.limiter.step(now - self._last_write)
+        if self.limiter.hold:  # the device has not yet confirmed enough to allow any new voltage: write nothing
+            return
         try:
             data = self.adapter.set_voltage(v)
         except EncodeError:  # cannot happen for limiter output; counted, never sent
             self.health.encode_errors += 1
             return
+        self.limiter.sent(now)  # before the bytes: a write that fails half-way may still reach the device
         self.transport.write(data)
         self._last_write = now
         self.health.writes += 1
@@ -442,6 +486,8 @@ class DeviceLink:
 
         Returns True when ``v_safe`` was written, False when the link was down or the time ran out.
         """
+        with self._lock:
+            self.closing = True
         self.watchdog.timeout = -1.0  # expired from now on: target is v_safe
         t_end = self.clock() + max_seconds
         while self.clock() < t_end:

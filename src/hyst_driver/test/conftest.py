@@ -37,6 +37,7 @@ class Rig:
         self.link = DeviceLink(SerialTransport(self.emu.link, backoff=(0.005, 0.05)), ad, limits, 1000, **kw)
         self.commands = hostile_commands(seed)
         self.readings = 0
+        self.last_seq: int | None = None  # device sample number of the newest reading (HDB/1)
 
     def run(self, seconds: float, command: bool = True) -> int:
         """Service the link for ``seconds``, answering every reading with the next hostile command."""
@@ -44,8 +45,10 @@ class Rig:
         t_end = time.monotonic() + seconds
         while time.monotonic() < t_end:
             self.link.wait(min(self.link.next_deadline(), t_end) - time.monotonic())
-            for _ in self.link.service():
+            for _, r in self.link.service():
                 n += 1
+                if r.seq is not None:
+                    self.last_seq = r.seq
                 if command:
                     self.link.command(next(self.commands))
         self.readings += n
@@ -58,6 +61,20 @@ class Rig:
             if pred():
                 return True
         return False
+
+    def fault_read(self, n_injected: int, timeout: float = 10.0) -> bool:
+        """Service the link until the host has read past the ``n_injected``-th fault the emulator put on the
+        wire (all kinds counted): an event, not a time. HDB/1: a sample numbered two after the fault (FIFO).
+        GCS (polled, one exchange in flight): two more samples once the fault is out, the second answering a
+        poll sent after it."""
+        if not self.run_until(lambda: sum(self.emu.injected.values()) >= n_injected, timeout):
+            return False
+        if self.link.adapter.streaming:
+            mark = self.emu.fault_seq
+            return self.run_until(lambda: self.last_seq is not None
+                                  and 2 <= (self.last_seq - mark) % 0x10000 < 0x8000, timeout)
+        goal = self.link.health.samples + 2
+        return self.run_until(lambda: self.link.health.samples >= goal, timeout)
 
     def close(self) -> None:
         self.link.close()
@@ -86,6 +103,29 @@ def assert_received_within(received, limits: Limits) -> None:
     step = limits.slew_max * limits.dt_max + 1e-6
     worst = max((abs(b - a) for a, b in zip(received, received[1:])), default=0.0)
     assert worst <= step, f"consecutive voltages differ by {worst} V > {step} V"
+
+
+def assert_applied_within(device, limits: Limits, start: int = 0) -> None:
+    """The voltage the emulated amplifier applied, sample by sample from ``start``: no step larger than one
+    sample of slew (two setpoints delivered within one sample count as the one step the stage feels), and inside
+    the window from the first sample the driver's first write moved it (it starts at the profile's 0 V)."""
+    a = device.applied[start:]
+    assert len(a) > 1, "the device took no samples"
+    step = limits.slew_max * limits.dt_max + 1e-6
+    worst, at = max((abs(a[k] - a[k - 1]), k) for k in range(1, len(a)))
+    assert worst <= step, (f"the applied voltage stepped {worst} V in one device sample > {step} V: sample "
+                           f"{start + at} of {start + len(a)}, {list(a[max(0, at - 4):at + 3])}; first received "
+                           f"{device.received[:4]}")
+    moved = next((k for k in range(len(a)) if a[k] != a[0]), len(a))
+    if moved < len(a):
+        lo, hi = min(a[moved:]), max(a[moved:])
+        assert limits.v_min <= lo and hi <= limits.v_max, (lo, hi)
+
+
+@pytest.fixture
+def check_applied():
+    """The invariant checker :func:`assert_applied_within`."""
+    return assert_applied_within
 
 
 @pytest.fixture

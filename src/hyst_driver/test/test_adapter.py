@@ -75,3 +75,45 @@ def test_make_adapter():
         make_adapter("scpi")
     with pytest.raises(ConfigError):
         AsciiAdapter(counts_to_m=0.0)
+
+
+def test_reconnect_seed_ignores_samples_from_before_the_handshake():
+    """A stream still running from the last connection: its samples were taken before the device read the
+    handshake (and a setpoint still ahead of it in the FIFO); only read-backs after the identify reply seed."""
+    from hyst_driver import protocol_ascii as hdb
+    from hyst_driver.safety import Limits
+    from hyst_driver.transport import DeviceLink
+
+    class Port:
+        url, last_error, is_open = "fake", "", True
+
+        def __init__(self):
+            self.rx, self.tx = b"", []
+
+        def try_open(self, now):
+            return True
+
+        def read(self):
+            data, self.rx = self.rx, b""
+            return data
+
+        def write(self, data):
+            self.tx.append(data)
+
+        def fileno(self):
+            return None
+
+        def close(self):
+            pass
+
+    port = Port()
+    link = DeviceLink(port, make_adapter("ascii", 2e-9), Limits(0.0, 150.0, 2e4, 0.0, dt_max=1e-3), 1000)
+    link.service(0.0)  # opens, sends the handshake
+    uv = hdb.volts_to_uv
+    port.rx = (hdb.encode_sample(hdb.Sample(1, 1000, 0, uv(50.0))) + hdb.encode_sample(hdb.Sample(2, 2000, 0, uv(50.0)))
+               + hdb.encode_ack("SP") + hdb.encode_identity(hdb.Identity("a", "b", "c", "d")))
+    link.service(0.001)
+    assert link.health.state == "handshake"  # the stale 50 V pair seeds nothing
+    port.rx = hdb.encode_sample(hdb.Sample(3, 3000, 0, uv(65.0))) + hdb.encode_sample(hdb.Sample(4, 4000, 0, uv(65.0)))
+    link.service(0.002)  # the RP replies: the stale setpoint (65 V) has been applied
+    assert link.health.state == "running" and link.limiter.confirmed == 65.0

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -25,10 +26,26 @@ def emu():
     e.stop()
 
 
-def _spin(node, ex, seconds: float) -> None:
-    t_end = time.monotonic() + seconds
+#: Deadline (s) of every wait: generous; tests wait for conditions, never a fixed time before asserting.
+DEADLINE = 20.0
+
+
+def _spin_until(ex, pred, timeout: float = DEADLINE) -> bool:
+    t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
+        if pred():
+            return True
         ex.spin_once(timeout_sec=0.01)
+    return pred()
+
+
+def _wait(pred, timeout: float = DEADLINE) -> bool:
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        if pred():
+            return True
+        time.sleep(0.01)
+    return pred()
 
 
 def test_parameters_declared_with_ranges_and_validated_on_set(ctx, emu):
@@ -59,9 +76,8 @@ def test_parameters_declared_with_ranges_and_validated_on_set(ctx, emu):
         assert r.successful and node.cfg.v_max == 100.0 and node.cfg.slew_max == 5e4
         r = node.set_parameters([Parameter("v_safe", value=140.0)])[0]  # now outside [v_min, v_max]
         assert not r.successful and "v_safe" in r.reason and node.cfg.v_safe == 0.0
-        _spin(node, ex, 0.3)
-        assert node.link.limiter.limits.v_max == 100.0  # swapped into the running link
-        assert node.link.health.state == "running"
+        # swapped into the running link (by its I/O thread), which is running
+        assert _spin_until(ex, lambda: node.link.limiter.limits.v_max == 100.0 and node.link.health.state == "running")
     finally:
         node.stop_io()
         node.link.close()
@@ -78,8 +94,9 @@ def test_gma_profile_sets_limit_defaults_and_ranges(ctx, tmp_path):
         assert (c.v_min, c.v_max, c.v_safe, c.slew_max) == (-5.0, 5.0, 0.0, 1.0e4)
         assert node.describe_parameter("v_min").floating_point_range[0].from_value == -5.0
         assert not node.set_parameters([Parameter("v_max", value=10.0)])[0].successful
-        time.sleep(0.1)
-        h = node.link.snapshot()  # no port: the node is up, reports the link down and keeps retrying
+        # no port: the node is up, reports the link down and keeps retrying
+        assert _wait(lambda: "no_such_port" in node.link.snapshot().last_link_error)
+        h = node.link.snapshot()
         assert h.state == "disconnected" and "no_such_port" in h.last_link_error
         d = node.diagnostics(h).status[0]
         assert d.level == d.ERROR and "disconnected" in d.message
@@ -171,6 +188,21 @@ def max_slew_step(dev) -> float:
     return worst
 
 
+def max_applied_step(dev) -> float:
+    """Largest change (V) of the voltage the amplifier applied between consecutive device samples: the step the
+    stage feels, whichever commands produced it (two delivered within one sample count as one step)."""
+    a = dev.applied
+    return max((abs(a[k] - a[k - 1]) for k in range(1, len(a))), default=0.0)
+
+
+def test_applied_step_check_sees_two_commands_within_one_sample():
+    class Dev:
+        applied = [10.0, 10.0, 30.0, 50.0]
+    assert max_applied_step(Dev) == pytest.approx(20.0)
+    Dev.applied = [10.0, 10.0, 50.0]  # 30 V and 50 V arrived within one sample: received steps 20 + 20 V
+    assert max_applied_step(Dev) == pytest.approx(40.0)
+
+
 def test_slew_check_judges_steps_across_a_reconnect_from_the_applied_voltage():
     class Dev:
         received = [10.0, 30.0, 50.0, 70.5, 90.0]
@@ -185,7 +217,15 @@ def test_slew_check_judges_steps_across_a_reconnect_from_the_applied_voltage():
 def test_node_survives_every_fault_class_and_ramps_to_safe_on_sigint(ctx, emu):
     """Each fault class 100 times into one running node: after every fault samples flow again (the node stays
     up and reconnects after each unplug), the faults are counted on /diagnostics, and no voltage outside the
-    limits or faster than the slew limit ever reaches the device, while the command stream is hostile."""
+    limits or faster than the slew limit ever reaches the device, while the command stream is hostile. The
+    slew limit is judged against the voltage the amplifier applied at each of its samples.
+
+    Measured with three CPU hogs beside it (load 8.5-13.7 on 2 cores; ``pytest -s`` prints the verdict line):
+    before the in-flight envelope, a 100 V applied step (38.3 V between consecutive writes); with it, 14 of 14
+    runs (commit 3623da3; 1.24 M device samples, 104-126 reconnects a run) max applied step 20.000000 V, applied
+    voltage in [10, 120] V. Three of those runs failed elsewhere: one unplug of 100 not recovered within 20 s,
+    the shutdown race fixed after (6bdd3bc), and one shutdown ramp not confirmed within its time.
+    """
     runs = 100
     proc = subprocess.Popen(_node_cmd("-p", f"port:={emu.link}", "-p", "v_min:=10.0", "-p", "v_max:=120.0",
                                       "-p", "slew_max:=20000.0", "-p", "v_safe:=20.0", "-p", "link_timeout:=0.2",
@@ -197,36 +237,53 @@ def test_node_survives_every_fault_class_and_ramps_to_safe_on_sigint(ctx, emu):
         recovered = dict.fromkeys(FAULTS, 0)
         for fault in FAULTS:
             for _ in range(runs):
+                n = emu.injected[fault]
                 emu.inject(fault, 0.05 if fault == "timeout" else 0.03)
-                probe.spin(0.06)
-                recovered[fault] += probe.wait_states(5, 5.0)  # samples again: stayed up / reconnected
+                assert _wait(lambda: emu.injected[fault] > n), f"emulator never applied {fault}"
+                probe.spin(0.06)  # pacing only (the fault plays out); what follows waits for events
+                recovered[fault] += probe.wait_states(5, DEADLINE)  # samples again: stayed up / reconnected
             assert proc.poll() is None, f"node died after {fault}"
         assert recovered == dict.fromkeys(FAULTS, runs), recovered
         n_before = len(probe.states)
-        d = probe.wait_diag(lambda d: d["state"] == "running", 5.0)
+        d = probe.wait_diag(lambda d: d["state"] == "running", DEADLINE)
         assert d is not None
-        probe.spin(0.3)
-        assert len(probe.states) > n_before + 100  # samples flow again after the faults
-        last = probe.wait_diag(lambda d: True, 3.0)
+        assert probe.wait_states(100, DEADLINE)  # samples flow again after the faults
+        last = probe.wait_diag(lambda d: True, DEADLINE)
         c = {k: int(last[k]) for k in ("bad_frames", "device_errors", "timeouts", "disconnects", "connects",
                                         "rejected", "clipped", "bad_commands")}
-        assert c["bad_frames"] >= runs and c["device_errors"] >= runs and c["timeouts"] >= runs, c
-        assert c["disconnects"] >= runs and c["connects"] >= runs + 1, c  # every unplug: a reconnect
+        # Each fault shows in the counters; 5 % may hide behind another event on a loaded host (measured at load
+        # 10: 29 extra reconnects after stalls longer than link_timeout; a reconnect discards the stale bytes, one
+        # device error with them; an unplug while already reconnecting is no new disconnect).
+        least = 0.95 * runs
+        assert c["bad_frames"] >= least and c["device_errors"] >= least and c["timeouts"] >= least, c
+        assert c["disconnects"] >= least and c["connects"] >= least + 1, c  # every unplug: a reconnect
         assert c["rejected"] > 0 and c["clipped"] > 0 and c["bad_commands"] > 0, c
         assert any(d["level"] != 0 for d in probe.diag), "faults never showed as WARN/ERROR"
         assert all(10.0 <= s.effort[0] <= 120.0 for s in probe.states[-100:])
         assert float(last["latency_ms.p50"]) > 0.0  # answers carry the state stamp: loop latency is reported
     finally:
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=20)
+        out, err = proc.communicate(timeout=60)
         probe.node.destroy_node()
+        rx = emu.device.received
+        _wait(lambda: rx and rx[-1] == 20.0)  # the emulator reads the last line in its own time
+        a = emu.device.applied
+        first = next((k for k, v in enumerate(a) if v != a[0]), 0)
+        # printed whatever failed above: the safety verdict of every run (pytest -s) is the measurement
+        print(f"\nfault test: max applied step {max_applied_step(emu.device):.6f} V over {len(a)} samples, "
+              f"applied in [{min(a[first:]):.6f}, {max(a[first:]):.6f}] V, max received step "
+              f"{max_slew_step(emu.device):.6f} V, load {os.getloadavg()[0]:.1f}; node: "
+              + " ".join(f"{k}={probe.diag[-1].get(k)}" for k in ("connects", "held", "expired", "unexplained")
+                         if probe.diag))
     assert proc.returncode == 0, err
     assert "ramped to v_safe = 20.0 V" in err
-    time.sleep(0.05)
-    rx = emu.device.received
-    assert rx[-1] == 20.0
+    assert rx[-1] == 20.0, rx[-3:]
     assert 10.0 <= min(rx) and max(rx) <= 120.0
     assert max_slew_step(emu.device) <= 20.0 + 1e-6
+    # judged against the voltage actually applied, sample by sample (the stage starts at 0 V; the driver's
+    # first write is v_min = 10 V, a 10 V step)
+    assert max_applied_step(emu.device) <= 20.0 + 1e-6, max_applied_step(emu.device)
+    assert 10.0 <= min(a[first:]) and max(a[first:]) <= 120.0
 
 
 def test_help_lists_every_parameter_and_exits_0(capsys):

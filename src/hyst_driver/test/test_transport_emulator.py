@@ -1,4 +1,6 @@
-"""Transport (loop://, pty, backoff) and the emulator's protocol engine, byte for byte."""
+"""Transport (loop://, pty, backoff) and the emulator's protocol engine, byte for byte.
+
+Waits are for conditions with generous deadlines (:data:`DEADLINE`), never a fixed time before an assertion."""
 from __future__ import annotations
 
 import os
@@ -15,13 +17,24 @@ from hyst_driver.emulator import EmulatedDevice, FaultRates, PtyEmulator, build_
 from hyst_driver.errors import LinkError
 from hyst_driver.transport import SerialTransport
 
+#: Deadline (s) of every wait: only decides when a hung test gives up.
+DEADLINE = 10.0
+
+
+def _read_until(t: SerialTransport, pred, timeout: float = DEADLINE) -> bytes:
+    """Read from ``t`` until ``pred(data)`` or the deadline; return everything read."""
+    deadline, data = time.monotonic() + timeout, b""
+    while not pred(data) and time.monotonic() < deadline:
+        data += t.read()
+        time.sleep(0.005)
+    return data
+
 
 def test_loop_url_round_trip():
     t = SerialTransport("loop://")
     assert t.try_open(0.0) and t.is_open and t.fileno() is None
     t.write(hdb.encode_identify())
-    time.sleep(0.01)
-    assert t.read() == b"$ID*3D\r\n"
+    assert _read_until(t, lambda d: b"\n" in d) == b"$ID*3D\r\n"
     t.close()
     with pytest.raises(LinkError):
         t.read()
@@ -49,15 +62,18 @@ def test_vanished_pty_raises_link_error():
     with PtyEmulator(build_device("pea", 1000.0)) as emu:
         t = SerialTransport(emu.link)
         assert t.try_open(0.0)
-        emu.inject("unplug", 0.5)
+        emu.inject("unplug", 1.5)  # long: the checks while unplugged must not race the replug on a loaded host
+        deadline = time.monotonic() + DEADLINE
         with pytest.raises(LinkError):
-            for _ in range(200):
+            while time.monotonic() < deadline:  # until the emulator has pulled the plug
                 t.read()
                 t.write(b"$RP*91\r\n")
                 time.sleep(0.005)
         assert not t.is_open and not os.path.exists(emu.link)
         assert not SerialTransport(emu.link).try_open(0.0)  # the path is gone while unplugged
-        time.sleep(0.6)
+        deadline = time.monotonic() + DEADLINE
+        while not os.path.exists(emu.link) and time.monotonic() < deadline:
+            time.sleep(0.01)
         assert os.path.exists(emu.link) and SerialTransport(emu.link).try_open(0.0)  # back at the same path
 
 
@@ -116,10 +132,7 @@ def test_cli_prints_port_serves_and_cleans_up(tmp_path):
         t = SerialTransport(str(link))
         assert t.try_open(0.0)
         t.write(b"$RP*91\r\n")
-        deadline, data = time.monotonic() + 2.0, b""
-        while b"\n" not in data and time.monotonic() < deadline:
-            data += t.read()
-            time.sleep(0.005)
+        data = _read_until(t, lambda d: b"\n" in d)
         assert hdb.decode_reply(data).uv == 0  # GMA rests at 0 V
         t.close()
     finally:
@@ -157,3 +170,18 @@ def test_device_clock_follows_a_device_that_lost_time():
     stamps = [c.map((1000 + k) * 1e-3, 50.3 + (1000 + k) * 1e-3 + 3e-4) for k in range(2500)]
     assert stamps[0] < 50.0 + 1.0 + 3e-4 + 1e-9           # within the window the old offset still holds
     assert abs(stamps[-1] - (50.3 + 3.499 + 3e-4)) < 1e-9  # one window later the stamps are right again
+
+
+def test_device_clock_is_settled_only_after_a_full_window_since_reset():
+    """Late first arrivals (a busy host after a reconnect) make the first mapped times late by as much: the
+    limiter may use them to forget writes only once a whole window has been mapped."""
+    from hyst_driver.transport import DeviceClock
+
+    c = DeviceClock(window=1.0)
+    late = [c.map(k * 1e-3, 10.0 + k * 1e-3 + 0.3) for k in range(5)]  # all 0.3 s late: looks like no latency
+    assert not c.settled and late[0] - 10.0 > 0.29                         # the mapping cannot know
+    for k in range(5, 1001):
+        c.map(k * 1e-3, 10.0 + k * 1e-3 + 1e-4)
+    assert c.settled and abs(c.map(1.001, 11.0012) - (10.0 + 1.001 + 1e-4)) < 1e-9
+    c.reset()
+    assert not c.settled
