@@ -84,3 +84,10 @@ def test_parameter_nodes_run_through_the_runner_with_all_or_nothing_parameters(r
     calls = {getattr(c.func, "id", "") for c in ast.walk(main) if isinstance(c, ast.Call)}
     assert "run_node" in calls and "init" not in {getattr(c.func, "attr", "") for c in ast.walk(main)
                                                    if isinstance(c, ast.Call)}
+
+
+def test_the_driver_node_has_all_or_nothing_parameters():
+    """Its main keeps its own loop for now (a spinner thread, the ramp to v_safe before the port closes)."""
+    tree = ast.parse((SRC / "hyst_driver" / "hyst_driver" / "driver_node.py").read_text(encoding="utf-8"))
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "DriverNode")
+    assert [getattr(b, "id", "") for b in cls.bases] == ["AtomicParametersNode"]

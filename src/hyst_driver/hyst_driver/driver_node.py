@@ -21,11 +21,12 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
+
+from hyst_common.node import AtomicParametersNode
 
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 from hyst_sim.profiles import get_profile
@@ -123,7 +124,7 @@ def usage() -> str:
     return "\n".join(lines)
 
 
-class DriverNode(Node):
+class DriverNode(AtomicParametersNode):
     """Serial driver for the PEA/GMA amplifier and displacement sensor (see module docstring)."""
 
     #: Parameters that need a new connection; changing them at run time is refused with a reason.
