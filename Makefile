@@ -18,7 +18,7 @@ help:
 	@echo "make test   - set up if needed, run every test (unit, node, multi-process)"
 	@echo "make test-stress - make test 3 times in a row beside 2 CPU-bound processes; pass/fail per run"
 	@echo "make bench  - run the benchmarks under bench/ and print their tables"
-	@echo "make setup  - create .venv (Python 3.12) with pinned dependencies and the four packages (editable)"
+	@echo "make setup  - create .venv (Python 3.12) with pinned dependencies and the five packages (editable)"
 	@echo "make colcon - colcon build the workspace into build/ and install/ (what a rig with ROS 2 Jazzy does)"
 
 setup: $(STAMP)
@@ -31,6 +31,7 @@ demo: $(STAMP)
 	@$(VENV)/bin/hyst demo
 
 test: $(STAMP)
+	@$(VENV)/bin/ruff check --quiet src test bench tools conftest.py && echo "ruff: no findings (ruff.toml)"
 	@PATH="$(VENV)/bin:$$PATH" fastdds shm clean >/dev/null 2>&1 || true
 	@$(PY) -m pytest $(PYTEST_ARGS)
 

@@ -67,7 +67,7 @@ def test_mu_selection_matches_4_15_4_16_and_is_positive_under_remark_41():
 
 def test_exact_inversion_reproduces_the_model():
     """invert_nu(exact) solves ν·μ(ν, v_u) = y_r with v_u = |u_k − u_{k−1}|: mbw_step confirms it."""
-    p = THESIS_FIG38 = np.array([0.4346, 1e-6, 0.0345, 0.09, -0.05, -0.09, 0.9995, 0.9995])
+    p = np.array([0.4346, 1e-6, 0.0345, 0.09, -0.05, -0.09, 0.9995, 0.9995])
     rng = np.random.default_rng(2)
     for y_prev, u_prev, target in rng.uniform([-6, -10, -8], [6, 10, 8], size=(300, 3)):
         y_r = target - p[6] * y_prev

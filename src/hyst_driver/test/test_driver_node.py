@@ -244,7 +244,6 @@ def test_node_survives_every_fault_class_and_ramps_to_safe_on_sigint(ctx, emu):
                 recovered[fault] += probe.wait_states(5, DEADLINE)  # samples again: stayed up / reconnected
             assert proc.poll() is None, f"node died after {fault}"
         assert recovered == dict.fromkeys(FAULTS, runs), recovered
-        n_before = len(probe.states)
         d = probe.wait_diag(lambda d: d["state"] == "running", DEADLINE)
         assert d is not None
         assert probe.wait_states(100, DEADLINE)  # samples flow again after the faults

@@ -6,7 +6,6 @@ from hyst_model.core import pea_default
 from hyst_model.effects import compose
 from hyst_model.effects.delay import Delay, _fir_delay
 from hyst_model.errors import EffectError
-from hyst_model.models import data_config
 from hyst_model.spec import build_model
 
 DT = 5e-4

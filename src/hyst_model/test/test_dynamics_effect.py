@@ -112,7 +112,7 @@ def test_fft_upsampling_is_exact_for_a_multisine():
 
 def test_recovers_the_published_parameters_from_noiseless_synthetic_data():
     """Structure (b) on a short slice: data from the integrator with the benchmark's Table 1 values."""
-    fs, n, S = 750.0, 1500, 20
+    fs, n = 750.0, 1500
     u = _multisine(n, fs, 5, 150, 50, 7)
     cfg = {"dt": 1 / fs, "u_scale": 20.0, "y_scale": 6.7e-4, "dynamics.structure": "feedback",
            "dynamics.interp": "fft"}

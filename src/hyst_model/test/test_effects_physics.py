@@ -3,7 +3,6 @@ and each effect's start() recovers a planted effect from a residual."""
 import numpy as np
 import pytest
 
-from hyst_model.effects import compose
 from hyst_model.effects.base import Inner
 from hyst_model.effects.creep import Creep, creep_term
 from hyst_model.effects.delay import Delay

@@ -36,7 +36,6 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from pathlib import Path
 
     from ..io import read_params, write_csv
     from ..io.csvio import read_input_csv

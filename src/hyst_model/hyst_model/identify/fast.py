@@ -143,7 +143,6 @@ def equation_error_starts(base: MBWModel, u: np.ndarray, y: np.ndarray, a: int =
     if rows.size > max_rows:
         rows = rows[:: int(np.ceil(rows.size / max_rows))]
     u1, u0 = un[rows], un[rows - 1]
-    v = np.abs(u1 - u0)
     Y1, Y0 = yf[rows], yf[rows - 1]
     c_lo, c_hi = float(yf[k0:][kk[k0:]].min()), float(yf[k0:][kk[k0:]].max())
     pad = 0.25 * (c_hi - c_lo) + 1e-12
