@@ -31,10 +31,7 @@ from hyst_model.io.bag import write_state_bag  # noqa: E402
 pytestmark = [pytest.mark.slow, pytest.mark.ros]
 RATE = 1000.0
 BIN = Path(sys.executable).parent
-SIM = ("import sys, rclpy\nfrom rclpy.experimental import EventsExecutor\nfrom hyst_sim.sim_node import SimNode\n"
-       "rclpy.init(args=sys.argv)\nn = SimNode()\nex = EventsExecutor()\nex.add_node(n)\n"
-       "try:\n    while rclpy.ok():\n        ex.spin_once(timeout_sec=0.1)\nexcept BaseException:\n    pass\n"
-       "finally:\n    n.destroy_node()\n    rclpy.try_shutdown()\n")
+
 
 
 def _stamp(m) -> float:
@@ -91,7 +88,7 @@ def test_ident_node_push_into_running_controller_leaves_no_transient(algorithm, 
         executor.spin_once(timeout_sec=0.05)
 
     try:
-        start([sys.executable, "-c", SIM, "--ros-args", "-p", f"rate:={RATE}", "-p", "mode:=lockstep"])
+        start([str(BIN / "hyst_sim_node"), "--ros-args", "-p", f"rate:={RATE}", "-p", "mode:=lockstep"])
         deadline = time.monotonic() + 60.0
         while not states and time.monotonic() < deadline:
             spin()
@@ -115,13 +112,7 @@ def test_ident_node_push_into_running_controller_leaves_no_transient(algorithm, 
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
-        for p in procs:
-            p.terminate()
-        for p in procs:
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        _stop(procs)
 
     t = np.array(sorted(states))
     e = np.array([states[k] for k in t]) - parse_reference("sine:5")(t)
@@ -134,3 +125,13 @@ def test_ident_node_push_into_running_controller_leaves_no_transient(algorithm, 
     assert before.size > 1000 and after.size > 1500
     assert after.max() <= max(3.0 * before.max(), 30e-9), (after.max(), before.max())
 
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    """SIGTERM (the nodes' runner stops on it), then kill what is still there after 10 s."""
+    for p in procs:
+        p.terminate()
+    for p in procs:
+        try:
+            p.wait(10)
+        except subprocess.TimeoutExpired:
+            p.kill()
