@@ -244,8 +244,16 @@ class Compensated:
         # passed d + 1 samples ago (the published error compares with that, not with a future reference).
         self._passed: deque[float] = deque(maxlen=int(round(comp.preview / inner.dt)) + 1)
 
-    def __getattr__(self, item):  # limits, dt, gains, set_model, sync_applied, notice_gap, ...
+    def __getattr__(self, item):  # dt, gains, set_model, sync_applied, notice_gap, ...
         return getattr(self.inner, item)
+
+    @property
+    def limits(self):
+        return self.inner.limits
+
+    @limits.setter
+    def limits(self, value) -> None:  # the node swaps limits on a parameter change: they belong to the law
+        self.inner.limits = value
 
     @property
     def preview(self) -> float:

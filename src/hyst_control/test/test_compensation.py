@@ -37,6 +37,16 @@ def test_plan_refuses_missing_out_of_range_and_uninvertible_effects():
         _plan(["creep"], creep__gain=0.29)
 
 
+def test_limits_set_on_the_wrapper_reach_the_law():
+    from hyst_control.limits import CommandLimits
+
+    c = make_controller("dppc", pea_default(), DT, compensation=_plan(["creep"], creep__gain=0.01))
+    assert isinstance(c, Compensated)
+    new = CommandLimits(10.0, 100.0, 1e5, 20.0)
+    c.limits = new
+    assert c.inner.limits is new and c.limits is new
+
+
 def test_no_effects_leaves_the_law_unwrapped():
     c = make_controller("dppc", pea_default(), DT, compensation=_plan([]))
     assert not isinstance(c, Compensated)
