@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
-from functools import lru_cache
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
@@ -27,98 +25,23 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from hyst_model.core import PARAM_NAMES, MBWParams, pea_default
+from hyst_model.core import MBWParams
 from hyst_common.node import AtomicParametersNode, run_node
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .base import check_model, hand_over
-from .compensation import Compensation, effect_parameters, plan_compensation
-from .dmrac import TABLE53, DMRACGains
-from .dppc import DPPCGains
+from .compensation import effect_parameters
+from .dmrac import TABLE53
 from .errors import ControlError
 from .limits import GMA_LIMITS, PEA_LIMITS, CommandLimits
 from .loop import ALGORITHMS, make_controller
-from .pid import PIDGains
-from .reference import Reference, parse_reference
-from .stability import POLICIES, Resonance, StabilityVerdict, guard
+from .reference import parse_reference
+from .controller_settings import GAINS, MODEL_KEYS, ControllerSettings, cached_guard, profile_model
+from .stability import POLICIES, Resonance, StabilityVerdict
 
 __all__ = ["ControllerNode", "ControllerSettings", "main"]
 
 _F = float
-# name: (default, lo, hi, description) for every gain; one table feeds declaration, validation and application.
-_GAINS = {
-    "dppc": (DPPCGains, {
-        "lambda0": (20e-6, 1e-9, 1e-3, "initial funnel half-width λ0 (m), Table 4.2: 20 µm"),
-        "lambda_inf": (0.4e-6, 1e-10, 1e-4, "final funnel half-width λ∞ (m), Table 4.2: 0.4 µm"),
-        "omega": (0.01, 1e-6, 0.999, "funnel decay per sample ω (4.7)"),
-        "chi": (0.1, 1e-3, 0.999, "error contraction χ (4.11); larger = gentler, more robust"),
-        "h_lower": (1.0, 0.01, 100.0, "lower funnel factor h̲ (4.8)"),
-        "h_upper": (1.0, 0.01, 100.0, "upper funnel factor h̄ (4.8)"),
-        "funnel_margin": (0.9, 0.1, 0.99, "out-of-funnel re-initialisation margin ρ"),
-        "ki": (0.0, 0.0, 0.99, "integral of the error on the target (beyond thesis; 0 = off)"),
-        "zeta0": (1e-3, 1e-9, 1.0, "lower bound on μ (Assumption 4.1)"),
-        "exact_rate": (True, None, None, "invert with the input rate (true) or the reference rate r_u (4.3)")}),
-    "dmrac": (DMRACGains, {
-        "kappa1": (0.01, 1e-6, 1.99, "adaptation gain κ1 of ζ1, ψ1, α1 (5.12)-(5.17)"),
-        "kappa2": (0.01, 0.0, 1.99, "adaptation gain κ2 of ζ2, ψ2, α2"),
-        "a_m": (0.1, -0.99, 0.99, "reference-model pole a_m (5.3) = closed-loop error pole"),
-        "zeta0": (1e-3, 1e-9, 1.0, "projection bound ζ0 (5.12b)"),
-        "varrho": (1e-4, 1e-9, 1.0, "projection margin ϱ (5.16b)"),
-        "theta_max": (10.0, 0.01, 1e3, "box on every estimate (model units)"),
-        "deadzone": (0.0, 0.0, 1e-6, "no adaptation below this estimation error (m)"),
-        "exact_rate": (True, None, None, "invert with the input rate (true) or r_u (5.4)")}),
-    "pid": (PIDGains, {
-        "kp": (1.0e6, 0.0, 1e9, "proportional gain (V/m)"),
-        "ki": (8.0e9, 0.0, 1e13, "integral gain (V/(m s))"),
-        "kd": (0.0, 0.0, 1e6, "derivative gain (V s/m)"),
-        "t_filter": (2e-3, 1e-6, 1.0, "derivative filter time constant (s)"),
-        "t_track": (5e-3, 1e-6, 10.0, "anti-windup back-calculation time constant (s)")}),
-}
-_MODEL_KEYS = PARAM_NAMES + ("offset", "u_scale", "y_scale")
-# The check is a few tens of ms; the on-set callback and the post-set callback both build the settings.
-_guard = lru_cache(maxsize=64)(guard)
-
-
-@dataclass(frozen=True)
-class ControllerSettings:
-    """Every node parameter as plain values; swapped as a whole on a parameter change."""
-
-    algorithm: str
-    rate: float
-    limits: CommandLimits
-    watchdog_periods: int
-    state_decimation: int
-    dppc: DPPCGains
-    dmrac: DMRACGains
-    dmrac_initial: str
-    pid: PIDGains
-    model: MBWParams
-    reference: Reference | None = None
-    #: The params file's effects (innermost first) and their parameters/configuration, dotted (``creep.gain``).
-    effects: tuple = ()
-    effect_values: tuple = ()
-    stability: StabilityVerdict | None = None
-
-    def compensation(self) -> Compensation:
-        """A fresh compensation (its effects keep per-run state) for the model's effects."""
-        vals = dict(self.effect_values)
-        return plan_compensation(self.model, self.effects, vals, vals, 1.0 / self.rate)
-
-    def gains(self, algorithm: str):
-        """The gains that run: derated by the stability check when the resonance demands it."""
-        st = self.stability
-        if st is not None and st.algorithm == algorithm:
-            return st.gains
-        return getattr(self, algorithm) if algorithm in _GAINS else None
-
-
-def _profile_model(profile: str) -> MBWParams:
-    """The sim's default stage model for a profile (the embedded default when hyst_sim is absent)."""
-    try:
-        from hyst_sim.profiles import get_profile  # noqa: PLC0415 - sibling package, numerical core
-        return get_profile(profile).model()
-    except Exception:  # noqa: BLE001 - unknown profile is reported by the limits, the model falls back
-        return pea_default()
 
 
 def _fp(lo, hi):
@@ -192,7 +115,7 @@ class ControllerNode(AtomicParametersNode):
         d("state_decimation", 10, ParameterDescriptor(
             description="publish /controller/state every N samples", integer_range=[IntegerRange(
                 from_value=1, to_value=100_000, step=1)]))
-        for alg, (_, spec) in _GAINS.items():
+        for alg, (_, spec) in GAINS.items():
             for name, (default, lo, hi, txt) in spec.items():
                 desc = ParameterDescriptor(description=txt) if lo is None else \
                     ParameterDescriptor(description=txt, floating_point_range=_fp(lo, hi))
@@ -204,7 +127,7 @@ class ControllerNode(AtomicParametersNode):
         d("stability.gain_margin", 2.0, ParameterDescriptor(
             description="gain margin (factor, both ways) the loop with the resonance must keep",
             floating_point_range=_fp(1.0, 10.0)))
-        m = _profile_model(self.get_parameter("profile").value)
+        m = profile_model(self.get_parameter("profile").value)
         d("model.base", "mbw", ParameterDescriptor(description="base model of the params file (controllers need mbw)"))
         d("model.effects", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
             description="effects of the params file (innermost first): those with an inverse are compensated "
@@ -213,7 +136,7 @@ class ControllerNode(AtomicParametersNode):
         d("model.dt", 0.0, ParameterDescriptor(
             description="sample period the model was identified at (s); 0 = unknown; must equal 1/rate",
             floating_point_range=_fp(0.0, 1.0)))
-        for key in _MODEL_KEYS:
+        for key in MODEL_KEYS:
             d(f"model.{key}", _F(getattr(m, key)), ParameterDescriptor(
                 description=f"stage model {key} (params file; thesis ν convention)",
                 floating_point_range=_fp(-1e6, 1e6)))
@@ -246,8 +169,8 @@ class ControllerNode(AtomicParametersNode):
         init = str(get("dmrac.initial")).lower()
         if init != "model" and init not in TABLE53:
             raise ControlError("dmrac.initial must be model, cs0, cs1, cs2 or cs3")
-        gains = {a: cls(**{n: get(f"{a}.{n}") for n in spec}) for a, (cls, spec) in _GAINS.items()}
-        model = check_model(MBWParams(**{k: _F(get(f"model.{k}")) for k in _MODEL_KEYS}))  # whatever runs now
+        gains = {a: cls(**{n: get(f"{a}.{n}") for n in spec}) for a, (cls, spec) in GAINS.items()}
+        model = check_model(MBWParams(**{k: _F(get(f"model.{k}")) for k in MODEL_KEYS}))  # whatever runs now
         try:
             effects = tuple(str(e) for e in (get("model.effects") or ()) if str(e))  # [""] = none (ROS types lists)
         except ParameterUninitializedException:
@@ -260,7 +183,7 @@ class ControllerNode(AtomicParametersNode):
         if policy not in POLICIES:
             raise ControlError(f"stability.policy must be one of {', '.join(POLICIES)}, got {policy!r}")
         res = Resonance(fn, _F(get("model.dynamics.zeta"))) if fn > 0 else None
-        stab = _guard(alg, gains.get(alg), model, 1.0 / rate, res, policy, _F(get("stability.gain_margin")),
+        stab = cached_guard(alg, gains.get(alg), model, 1.0 / rate, res, policy, _F(get("stability.gain_margin")),
                       (_F(get("v_min")), _F(get("v_max"))))  # StabilityError (a ControlError) = rejected
         s = ControllerSettings(
             algorithm=alg, rate=_F(get("rate")),
