@@ -20,13 +20,13 @@ import math
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from hyst_model.core import MBWParams
-from hyst_common.node import AtomicParametersNode, run_node
+from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .base import check_model, hand_over
@@ -42,10 +42,6 @@ from .stability import POLICIES, Resonance, StabilityVerdict
 __all__ = ["ControllerNode", "ControllerSettings", "main"]
 
 _F = float
-
-
-def _fp(lo, hi):
-    return [FloatingPointRange(from_value=_F(lo), to_value=_F(hi), step=0.0)]
 
 
 class ControllerNode(AtomicParametersNode):
@@ -96,29 +92,27 @@ class ControllerNode(AtomicParametersNode):
                                                 read_only=True))
         lim = GMA_LIMITS if self.get_parameter("profile").value == "gma" else PEA_LIMITS
         d("algorithm", "dppc", ParameterDescriptor(description="dppc | dmrac | pid | open_loop (bumpless switch)"))
-        d("rate", 1000.0, ParameterDescriptor(description="expected state rate (Hz)", floating_point_range=_fp(1, 5000)))
+        d("rate", 1000.0, ParameterDescriptor(description="expected state rate (Hz)", floating_point_range=fp_range(1, 5000)))
         for n, v, txt in (("v_min", lim.v_min, "lowest command (V)"), ("v_max", lim.v_max, "highest command (V)"),
                           ("v_safe", lim.v_safe, "command held by the watchdog (V)")):
-            d(n, v, ParameterDescriptor(description=txt, floating_point_range=_fp(-200, 200)))
+            d(n, v, ParameterDescriptor(description=txt, floating_point_range=fp_range(-200, 200)))
         d("slew_max", lim.slew_max, ParameterDescriptor(description="command slew limit (V/s)",
-                                                        floating_point_range=_fp(1e-3, 1e9)))
+                                                        floating_point_range=fp_range(1e-3, 1e9)))
         d("watchdog_periods", 100, ParameterDescriptor(
-            description="no state for this many periods -> v_safe", integer_range=[IntegerRange(
-                from_value=2, to_value=1_000_000, step=1)]))
+            description="no state for this many periods -> v_safe", integer_range=int_range(2, 1_000_000)))
         d("reference", "", ParameterDescriptor(
             description="'' = follow /stage/reference; a spec (sine:5, step, c1, ...) = generate it internally "
                         "at the state stamps (deterministic, e.g. with a lockstep sim); time 0 = first state"))
         d("rt_priority", 0, ParameterDescriptor(
             description="SCHED_FIFO priority of the node's threads (0 = normal scheduling; applies at start; "
                         "see hyst_common.runtime)", read_only=True,
-            integer_range=[IntegerRange(from_value=0, to_value=RT_PRIORITY_MAX, step=1)]))
+            integer_range=int_range(0, RT_PRIORITY_MAX)))
         d("state_decimation", 10, ParameterDescriptor(
-            description="publish /controller/state every N samples", integer_range=[IntegerRange(
-                from_value=1, to_value=100_000, step=1)]))
+            description="publish /controller/state every N samples", integer_range=int_range(1, 100_000)))
         for alg, (_, spec) in GAINS.items():
             for name, (default, lo, hi, txt) in spec.items():
                 desc = ParameterDescriptor(description=txt) if lo is None else \
-                    ParameterDescriptor(description=txt, floating_point_range=_fp(lo, hi))
+                    ParameterDescriptor(description=txt, floating_point_range=fp_range(lo, hi))
                 d(f"{alg}.{name}", default, desc)
         d("dmrac.initial", "model", ParameterDescriptor(description="initial estimates: model | cs0..cs3 (Table 5.3)"))
         d("stability.policy", "derate", ParameterDescriptor(
@@ -126,7 +120,7 @@ class ControllerNode(AtomicParametersNode):
                         "robust gains, WARN) | warn (run them anyway, WARN) | refuse (reject, exit 2 at start)"))
         d("stability.gain_margin", 2.0, ParameterDescriptor(
             description="gain margin (factor, both ways) the loop with the resonance must keep",
-            floating_point_range=_fp(1.0, 10.0)))
+            floating_point_range=fp_range(1.0, 10.0)))
         m = profile_model(self.get_parameter("profile").value)
         d("model.base", "mbw", ParameterDescriptor(description="base model of the params file (controllers need mbw)"))
         d("model.effects", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
@@ -135,20 +129,20 @@ class ControllerNode(AtomicParametersNode):
                         "change and on /diagnostics, never silently dropped"))
         d("model.dt", 0.0, ParameterDescriptor(
             description="sample period the model was identified at (s); 0 = unknown; must equal 1/rate",
-            floating_point_range=_fp(0.0, 1.0)))
+            floating_point_range=fp_range(0.0, 1.0)))
         for key in MODEL_KEYS:
             d(f"model.{key}", _F(getattr(m, key)), ParameterDescriptor(
                 description=f"stage model {key} (params file; thesis ν convention)",
-                floating_point_range=_fp(-1e6, 1e6)))
+                floating_point_range=fp_range(-1e6, 1e6)))
         d("model.offset_bound", 1e-3, ParameterDescriptor(
             description="bound of the fitted offset (m; params file provenance, not used by the laws)",
-            floating_point_range=_fp(0.0, 1e6)))
+            floating_point_range=fp_range(0.0, 1e6)))
         # Every built-in effect's parameters at their identity values: a params file or a push may carry any.
         self._effect_keys = effect_parameters(1.0 / self.get_parameter("rate").value, m.u_scale, m.y_scale)
         for key, (default, txt) in self._effect_keys.items():
             if key in ("dynamics.fn", "dynamics.zeta"):  # the resonance the stability check uses
                 txt += "; with dynamics in model.effects the gains are checked against it (hyst_control.stability)"
-            desc = ParameterDescriptor(description=txt, floating_point_range=_fp(-1e6, 1e6)) \
+            desc = ParameterDescriptor(description=txt, floating_point_range=fp_range(-1e6, 1e6)) \
                 if isinstance(default, float) else ParameterDescriptor(description=txt)
             d(f"model.{key}", default, desc)
 

@@ -15,24 +15,16 @@ from __future__ import annotations
 
 import math
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from sensor_msgs.msg import JointState
 
-from hyst_common.node import AtomicParametersNode, run_node
+from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 
 from .errors import ControlError
 from .excitation import PARTS, ExcitationSpec, build_excitation
 from .limits import GMA_LIMITS, PEA_LIMITS
 
 __all__ = ["ExciteNode", "main"]
-
-
-def _fp(lo: float, hi: float) -> list:
-    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
-
-
-def _ip(lo: int, hi: int) -> list:
-    return [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
 
 
 class ExciteNode(AtomicParametersNode):
@@ -67,14 +59,14 @@ class ExciteNode(AtomicParametersNode):
             raise ControlError(f"profile must be pea or gma, got {prof!r}")
         lim = GMA_LIMITS if prof == "gma" else PEA_LIMITS
         s = ExcitationSpec()
-        d("rate", 1000.0, ParameterDescriptor(description="stage sample rate (Hz)", floating_point_range=_fp(1, 5000),
+        d("rate", 1000.0, ParameterDescriptor(description="stage sample rate (Hz)", floating_point_range=fp_range(1, 5000),
                                               **ro))
         d("v_min", lim.v_min, ParameterDescriptor(description="lowest command (V), inside the profile",
-                                                  floating_point_range=_fp(lim.v_min, lim.v_max), **ro))
+                                                  floating_point_range=fp_range(lim.v_min, lim.v_max), **ro))
         d("v_max", lim.v_max, ParameterDescriptor(description="highest command (V), inside the profile",
-                                                  floating_point_range=_fp(lim.v_min, lim.v_max), **ro))
+                                                  floating_point_range=fp_range(lim.v_min, lim.v_max), **ro))
         d("slew_max", float(min(lim.slew_max, 1e9)), ParameterDescriptor(
-            description="command slew limit (V/s)", floating_point_range=_fp(1e-3, 1e9), **ro))
+            description="command slew limit (V/s)", floating_point_range=fp_range(1e-3, 1e9), **ro))
         d("parts", ",".join(s.parts), ParameterDescriptor(description=f"comma list of {', '.join(PARTS)}", **ro))
         d("amplitudes", list(s.amplitudes), ParameterDescriptor(
             description="fractions of the range for sines/triangles (largest: multisine, sweep)", **ro))
@@ -84,17 +76,17 @@ class ExciteNode(AtomicParametersNode):
                                   ("f_lo", 1e-3, 2500.0, "multisine/sweep lowest frequency (Hz)"),
                                   ("f_hi", 1e-3, 2500.0, "multisine/sweep highest frequency (Hz)"),
                                   ("seconds", 1e-3, 3600.0, "multisine and sweep length (s)")):
-            d(name, float(getattr(s, name)), ParameterDescriptor(description=txt, floating_point_range=_fp(lo, hi),
+            d(name, float(getattr(s, name)), ParameterDescriptor(description=txt, floating_point_range=fp_range(lo, hi),
                                                                  **ro))
         d("periods", s.periods, ParameterDescriptor(description="periods per sine/triangle amplitude",
-                                                    integer_range=_ip(1, 10_000), **ro))
-        d("n_steps", s.n_steps, ParameterDescriptor(description="random step levels", integer_range=_ip(1, 10_000),
+                                                    integer_range=int_range(1, 10_000), **ro))
+        d("n_steps", s.n_steps, ParameterDescriptor(description="random step levels", integer_range=int_range(1, 10_000),
                                                     **ro))
         d("wait_for_subscribers", 1, ParameterDescriptor(
             description="answer no state until /stage/command has this many subscribers (stage + recorder = 2), "
-                        "so a recorder never misses the first commands", integer_range=_ip(1, 100), **ro))
+                        "so a recorder never misses the first commands", integer_range=int_range(1, 100), **ro))
         d("seed", 0, ParameterDescriptor(description="seed of step levels and multisine phases",
-                                         integer_range=_ip(0, 2**31 - 1), **ro))
+                                         integer_range=int_range(0, 2**31 - 1), **ro))
 
     def _read(self) -> ExcitationSpec:
         def g(name):

@@ -10,19 +10,15 @@ from __future__ import annotations
 
 import math
 
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from sensor_msgs.msg import JointState
 
-from hyst_common.node import AtomicParametersNode, run_node
+from hyst_common.node import AtomicParametersNode, fp_range, run_node
 
 from .errors import ControlError
 from .reference import SHAPES, Reference
 
 __all__ = ["ReferenceNode", "main"]
-
-
-def _fp(lo, hi):
-    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
 class ReferenceNode(AtomicParametersNode):
@@ -32,14 +28,14 @@ class ReferenceNode(AtomicParametersNode):
         super().__init__("hyst_reference", **kwargs)
         d = self.declare_parameter
         d("shape", "sine", ParameterDescriptor(description=" | ".join(SHAPES)))
-        d("amplitude", 10e-6, ParameterDescriptor(description="amplitude (m)", floating_point_range=_fp(0, 1e-3)))
-        d("frequency", 1.0, ParameterDescriptor(description="frequency (Hz)", floating_point_range=_fp(0, 500)))
+        d("amplitude", 10e-6, ParameterDescriptor(description="amplitude (m)", floating_point_range=fp_range(0, 1e-3)))
+        d("frequency", 1.0, ParameterDescriptor(description="frequency (Hz)", floating_point_range=fp_range(0, 500)))
         d("offset", 15e-6, ParameterDescriptor(description="offset / start level (m)",
-                                               floating_point_range=_fp(-1e-3, 1e-3)))
-        d("t0", 0.1, ParameterDescriptor(description="start of steps and ramps (s)", floating_point_range=_fp(0, 1e4)))
-        d("rate", 1000.0, ParameterDescriptor(description="publication rate (Hz)", floating_point_range=_fp(1, 5000)))
+                                               floating_point_range=fp_range(-1e-3, 1e-3)))
+        d("t0", 0.1, ParameterDescriptor(description="start of steps and ramps (s)", floating_point_range=fp_range(0, 1e4)))
+        d("rate", 1000.0, ParameterDescriptor(description="publication rate (Hz)", floating_point_range=fp_range(1, 5000)))
         d("duration", 0.0, ParameterDescriptor(description="seconds to run, then hold (0 = forever)",
-                                               floating_point_range=_fp(0, 1e6)))
+                                               floating_point_range=fp_range(0, 1e6)))
         self._ref = self._build()
         self._rate = float(self.get_parameter("rate").value)
         self._duration = float(self.get_parameter("duration").value)

@@ -19,14 +19,14 @@ from dataclasses import dataclass, replace
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
-from hyst_common.node import AtomicParametersNode
+from hyst_common.node import AtomicParametersNode, fp_range, int_range
 
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 from hyst_sim.profiles import get_profile
@@ -80,10 +80,6 @@ class DriverConfig:
     def limits(self) -> Limits:
         return Limits(self.v_min, self.v_max, self.slew_max, self.v_safe, dt_max=1.0 / self.rate,
                       safe_ramp_rate=self.safe_ramp_rate)
-
-
-def _fp(lo: float, hi: float) -> list[FloatingPointRange]:
-    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
 def param_table(prof) -> list[tuple[str, object, tuple | None, str]]:
@@ -140,9 +136,9 @@ class DriverNode(AtomicParametersNode):
         for name, default, rng, text in param_table(prof):
             desc = ParameterDescriptor(description=text)
             if isinstance(default, int):
-                desc.integer_range = [IntegerRange(from_value=rng[0], to_value=rng[1], step=1)]
+                desc.integer_range = int_range(rng[0], rng[1])
             elif isinstance(default, float):
-                desc.floating_point_range = _fp(*rng)
+                desc.floating_point_range = fp_range(*rng)
             self.declare_parameter(name, default, desc)
         self.cfg = self._read_config({}).validate()
         self.add_on_set_parameters_callback(self._on_set)

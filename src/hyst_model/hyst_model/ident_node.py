@@ -23,7 +23,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
@@ -32,7 +32,7 @@ from std_msgs.msg import String
 
 from .core.mbw import PARAM_NAMES
 from .errors import HystError
-from hyst_common.node import AtomicParametersNode, run_node
+from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 
 __all__ = ["IdentConfig", "IdentNode", "main", "fit_bag", "controller_parameters"]
 
@@ -140,10 +140,6 @@ def controller_parameters(model, theta, dt: float) -> list[Parameter]:
     return out
 
 
-def _fp(lo: float, hi: float) -> list[FloatingPointRange]:
-    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
-
-
 class IdentNode(AtomicParametersNode):
     """Refits the stage model from bags; see the module docstring."""
 
@@ -180,24 +176,24 @@ class IdentNode(AtomicParametersNode):
         d("bags", S, ParameterDescriptor(description="bags (rosbag2 dirs or .mcap files) to fit at start"))
         d("watch_dir", "", ParameterDescriptor(description="folder watched for new bags ('' = off)"))
         d("poll_period", 2.0, ParameterDescriptor(description="folder scan period (s)",
-                                                  floating_point_range=_fp(0.05, 600)))
+                                                  floating_point_range=fp_range(0.05, 600)))
         d("settle_time", 2.0, ParameterDescriptor(description="a bag is complete when unchanged this long (s)",
-                                                  floating_point_range=_fp(0.0, 3600)))
+                                                  floating_point_range=fp_range(0.0, 3600)))
         d("topic", "/stage/state", ParameterDescriptor(description="JointState topic with the stage state"))
         d("model", "mbw", ParameterDescriptor(description="base model: mbw | bw | pi"))
         d("effects", S, ParameterDescriptor(description="effects composed onto the base (hyst_model.effects)"))
         d("method", "fast", ParameterDescriptor(description="identifier: fast | epso | lsq"))
         d("seed", -1, ParameterDescriptor(description="random seed for epso (-1 = random)",
-                                          integer_range=[IntegerRange(from_value=-1, to_value=2**31 - 1, step=1)]))
+                                          integer_range=int_range(-1, 2**31 - 1)))
         d("val_fraction", 0.25, ParameterDescriptor(description="held-out tail of each bag for validation (0 = none)",
-                                                    floating_point_range=_fp(0.0, 0.9)))
+                                                    floating_point_range=fp_range(0.0, 0.9)))
         d("params_file", "", ParameterDescriptor(description="params file to write after each fit ('' = none)"))
         d("overwrite", False, ParameterDescriptor(
             description="replace a params file that existed before this node wrote it"))
         d("controller_node", "", ParameterDescriptor(
             description="push model.* to this node after each fit, e.g. /hyst_controller ('' = off)"))
         d("push_timeout", 5.0, ParameterDescriptor(description="wait this long for the controller's parameter "
-                                                               "service (s)", floating_point_range=_fp(0.1, 600)))
+                                                               "service (s)", floating_point_range=fp_range(0.1, 600)))
         d("gaps", "auto", ParameterDescriptor(
             description="irregular stamps in a bag: auto (collapse lockstep repeats, bridge up to 10 missed periods "
                         "with the input held, else keep the longest segment) | bridge | longest | refuse"))

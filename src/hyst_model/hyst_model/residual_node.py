@@ -36,7 +36,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -44,7 +44,7 @@ from sensor_msgs.msg import JointState
 from .core import mbw_rest_state, mbw_step
 from .errors import HystError
 from .model import MBWModel, Model
-from hyst_common.node import AtomicParametersNode, run_node
+from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 from .spec import build_model
 
 __all__ = ["ResidualNode", "ResidualSettings", "main"]
@@ -71,10 +71,6 @@ class ResidualSettings:
     def streaming(self) -> bool:
         """True when the model runs exactly per sample (the MBW/BW base without effects)."""
         return isinstance(self.model, MBWModel)
-
-
-def _fp(lo: float, hi: float) -> list[FloatingPointRange]:
-    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
 def _stamp(msg: JointState) -> float:
@@ -105,13 +101,13 @@ class ResidualNode(AtomicParametersNode):
         d = self.declare_parameter
         d("reset_gap", 0.5, ParameterDescriptor(
             description="restart the model at rest after a stamp gap longer than this (s) or a stamp going back",
-            floating_point_range=_fp(1e-4, 3600.0)))
+            floating_point_range=fp_range(1e-4, 3600.0)))
         d("history", 30.0, ParameterDescriptor(
             description="re-simulation window (s) for models without a per-sample form",
-            floating_point_range=_fp(0.1, 3600.0)))
+            floating_point_range=fp_range(0.1, 3600.0)))
         d("batch", 100, ParameterDescriptor(
             description="samples per re-simulation for models without a per-sample form",
-            integer_range=[IntegerRange(from_value=1, to_value=100_000, step=1)]))
+            integer_range=int_range(1, 100_000)))
         d("model.base", "mbw", ParameterDescriptor(description="base model (params file model.base)"))
         d("model.effects", Parameter.Type.STRING_ARRAY,
           ParameterDescriptor(description="effects in order (params file model.effects); empty = base only"))

@@ -39,11 +39,11 @@ import time
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
+from rcl_interfaces.msg import (ParameterDescriptor, ParameterType,
                                 SetParametersResult)
 from sensor_msgs.msg import JointState
 
-from hyst_common.node import AtomicParametersNode, run_node
+from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .errors import SimError
@@ -57,10 +57,6 @@ __all__ = ["SimNode", "SimSettings", "plant_config", "main"]
 _DIAG_PERIOD = 1.0      # s between /diagnostics messages
 _ANNOUNCE_PERIOD = 0.5  # s between repeats of the unanswered lockstep sample 0
 _MISSED_ERROR = 0.10    # share of missed realtime periods in a second that is an ERROR, not a WARN
-
-
-def _fp(lo: float, hi: float) -> list:
-    return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
 class SimNode(AtomicParametersNode):
@@ -120,20 +116,20 @@ class SimNode(AtomicParametersNode):
                                                 additional_constraints="one of: pea, gma"))
         prof = get_profile(self.get_parameter("profile").value)
         d("rate", 1000.0, ParameterDescriptor(description="sample rate (Hz); 2000 needs a single process",
-                                              floating_point_range=_fp(1.0, 5000.0)))
+                                              floating_point_range=fp_range(1.0, 5000.0)))
         d("v_min", prof.v_min, ParameterDescriptor(description="lowest voltage applied (V), inside the profile",
-                                                   floating_point_range=_fp(-5.0, 150.0)))
+                                                   floating_point_range=fp_range(-5.0, 150.0)))
         d("v_max", prof.v_max, ParameterDescriptor(description="highest voltage applied (V), inside the profile",
-                                                   floating_point_range=_fp(-5.0, 150.0)))
+                                                   floating_point_range=fp_range(-5.0, 150.0)))
         d("slew_max", prof.slew_max, ParameterDescriptor(description="amplifier slew limit (V/s)",
-                                                         floating_point_range=_fp(1e-3, 1e8)))
+                                                         floating_point_range=fp_range(1e-3, 1e8)))
         d("command_timeout", 0.2, ParameterDescriptor(
             description="no command for this long (s) -> ramp to v_safe (realtime mode)",
-            floating_point_range=_fp(1e-3, 3600.0)))
+            floating_point_range=fp_range(1e-3, 3600.0)))
         d("v_safe", prof.v_safe, ParameterDescriptor(description="voltage at start and after a timeout (V)",
-                                                     floating_point_range=_fp(-5.0, 150.0)))
+                                                     floating_point_range=fp_range(-5.0, 150.0)))
         d("safe_ramp_rate", 100.0, ParameterDescriptor(description="ramp rate towards v_safe after a timeout (V/s)",
-                                                       floating_point_range=_fp(1e-3, 1e8)))
+                                                       floating_point_range=fp_range(1e-3, 1e8)))
         d("frame_id", "stage", ParameterDescriptor(description="header.frame_id of /stage/state"))
         d("mode", "realtime", ParameterDescriptor(
             description="realtime | lockstep (one sample per answered state; deterministic)", read_only=True,
@@ -141,27 +137,26 @@ class SimNode(AtomicParametersNode):
         d("wait_for_subscribers", 1, ParameterDescriptor(
             description="publish the first sample only once /stage/state has this many subscribers (controller "
                         "+ recorder = 2), so no subscriber misses the start (both modes)", read_only=True,
-            integer_range=[IntegerRange(from_value=1, to_value=100, step=1)]))
+            integer_range=int_range(1, 100)))
         d("params_file", "", ParameterDescriptor(description="MBW params file ('' = embedded default stage)"))
         d("scenario_file", "", ParameterDescriptor(
             description="hidden-effects scenario file ('' = none); its contents are never reported"))
         d("seed", 0, ParameterDescriptor(description="seed of sensor noise and drift (applies at start)",
-                                         integer_range=[IntegerRange(from_value=0, to_value=2**31 - 1, step=1)]))
+                                         integer_range=int_range(0, 2**31 - 1)))
         d("rt_priority", 0, ParameterDescriptor(
             description="SCHED_FIFO priority of the node's threads, as the driver's (0 = normal scheduling; "
                         "applies at start; see hyst_common.runtime)", read_only=True,
-            integer_range=[IntegerRange(from_value=0, to_value=RT_PRIORITY_MAX, step=1)]))
+            integer_range=int_range(0, RT_PRIORITY_MAX)))
         for name in EFFECT_NAMES:
             spec = Effects.spec(name)
             default = {"noise": prof.sensor_noise, "quantization": prof.sensor_resolution}.get(name, 0.0)
             desc = f"{spec.doc} [{spec.unit}]" if spec.unit else spec.doc
             if spec.integer:
                 d(f"effects.{name}", int(default), ParameterDescriptor(
-                    description=desc, integer_range=[IntegerRange(from_value=int(spec.lower),
-                                                                  to_value=int(spec.upper), step=1)]))
+                    description=desc, integer_range=int_range(int(spec.lower), int(spec.upper))))
             else:
                 d(f"effects.{name}", float(default), ParameterDescriptor(
-                    description=desc, floating_point_range=_fp(spec.lower, spec.upper)))
+                    description=desc, floating_point_range=fp_range(spec.lower, spec.upper)))
 
     def _read_settings(self, changes: dict | None = None) -> SimSettings:
         def get(name):
