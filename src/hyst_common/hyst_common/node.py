@@ -29,9 +29,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_service import ParameterService
 from rclpy.signals import SignalHandlerOptions
-from rclpy.utilities import remove_ros_args
 
 from .errors import HystError
+from .runtime import own_args
 
 __all__ = ["run_node", "AtomicParametersNode", "fp_range", "int_range", "STARTUP_ERRORS"]
 
@@ -115,7 +115,7 @@ def run_node(make: Callable[[], Node], args: Sequence[str] | None = None, *, pro
         Further start-up errors of the node's own package.
     """
     argv = list(sys.argv if args is None else args)
-    own = remove_ros_args(args=argv)[1:]
+    own = own_args(argv[1:])
     if own:
         if set(own) & {"-h", "--help"}:
             print(usage)
@@ -129,7 +129,13 @@ def run_node(make: Callable[[], Node], args: Sequence[str] | None = None, *, pro
     if in_main:
         for sig in (signal.SIGINT, signal.SIGTERM):
             previous[sig] = signal.signal(sig, lambda *_: stop.set())
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except RuntimeError as err:  # rclpy's UnknownROSArgsError and kin: a bad --ros-args section
+        print(f"{prog}: error: ROS arguments not understood: {err}", file=sys.stderr)
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+        return 2
     node = None
     try:
         try:

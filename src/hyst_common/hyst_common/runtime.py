@@ -20,7 +20,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-__all__ = ["Scheduling", "set_realtime", "RT_PRIORITY_MAX", "own_args", "wants_help"]
+__all__ = ["Scheduling", "set_realtime", "RT_PRIORITY_MAX", "own_args"]
 
 #: Highest priority offered: 99 is left to the kernel's own watchdog threads.
 RT_PRIORITY_MAX = 98
@@ -92,13 +92,3 @@ def own_args(args: list[str] | None) -> list[str]:
     import sys
     argv = sys.argv[1:] if args is None else list(args)
     return argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv
-
-
-def wants_help(args: list[str] | None, usage: str) -> bool:
-    """Print ``usage`` and return True when the node was asked for ``-h``/``--help`` (before ROS starts, so
-    ``ros2 run PKG NODE --help`` answers without a middleware)."""
-    own = own_args(args)
-    if "--help" in own or "-h" in own:
-        print(usage)
-        return True
-    return False

@@ -107,6 +107,11 @@ def _run(*argv: str, **kw) -> subprocess.CompletedProcess:
 def test_runner_help_and_argument_errors_before_ros():
     r = _run("--help")
     assert r.returncode == 0 and "usage: probe_node" in r.stdout and not r.stderr.strip()
+    r = _run("-h", "--ros-args", "-p", "gain:=1.0")  # help is ours only before --ros-args
+    assert r.returncode == 0 and "usage: probe_node" in r.stdout
+    r = _run("--ros-args", "-h")  # after it, rclpy's: a ROS argument it does not know is one line, exit 2
+    assert r.returncode == 2 and "usage" not in r.stdout and "Traceback" not in r.stderr
+    assert r.stderr.strip().count("\n") == 0 and "probe_node: error:" in r.stderr
     r = _run("--bogus")
     assert r.returncode == 2 and r.stderr.strip().count("\n") == 0 and "probe_node: error:" in r.stderr
 
