@@ -169,9 +169,7 @@ class ControllerNode(AtomicParametersNode):
             effects = tuple(str(e) for e in (get("model.effects") or ()) if str(e))  # [""] = none (ROS types lists)
         except ParameterUninitializedException:
             effects = ()
-        named = {e.split(".")[0] for e in self._effect_keys}
-        evals = tuple((k, get(f"model.{k}")) for k in self._effect_keys if k.split(".")[0] in effects and
-                      k.split(".")[0] in named)
+        evals = tuple((k, get(f"model.{k}")) for k in self._effect_keys if k.split(".")[0] in effects)
         policy = str(get("stability.policy"))
         fn = _F(get("model.dynamics.fn")) if "dynamics" in effects else 0.0  # the identified resonance, if any
         if policy not in POLICIES:
