@@ -85,46 +85,37 @@ def _gains(args: argparse.Namespace, classes: dict):
     return cls(**kw) if kw else None
 
 
-def _params_rate(path: str) -> float:
-    """1/dt of a params file (2000 Hz when it has no dt)."""
+def _read_params(path: str):
+    """The params file as a :class:`hyst_model.io.params_file.ParamsSpec` (read once per run)."""
     from hyst_model.errors import HystError  # noqa: PLC0415
     from hyst_model.io.params_file import read_params  # noqa: PLC0415
 
     try:
-        mdt = read_params(path).config.get("dt")
+        return read_params(path)
     except HystError as err:
         raise ConfigError(str(err)) from err
-    return 1.0 / float(mdt) if mdt else 2000.0
 
 
-def _params_model(path: str, rate: float, no_effects: bool):
+def _params_model(spec, path: str, rate: float):
     """Base MBW and compensation of a params file; its ``dt`` must match the loop rate."""
-    from hyst_model.errors import HystError  # noqa: PLC0415
-    from hyst_model.io.params_file import read_params  # noqa: PLC0415
-
     from .compensation import Compensation, from_params  # noqa: PLC0415
 
-    try:
-        spec = read_params(path)
-    except HystError as err:
-        raise ConfigError(str(err)) from err
     mdt = spec.config.get("dt")
     if mdt and abs(float(mdt) * rate - 1.0) > 1e-6:
         raise ConfigError(f"{path} was identified at dt = {float(mdt):g} s: run with --rate {1.0 / float(mdt):g} "
                           "(the MBW recursion is per sample)")
-    if no_effects:
-        spec.effects = []
     model, comp = from_params(spec, 1.0 / rate)
     return model, comp if comp.used or comp.unused else Compensation()
 
 
-def _params_resonance(path: str):
-    """The identified resonance (``dynamics.fn``, ``dynamics.zeta``) of a params file, or None."""
-    from hyst_model.io.params_file import read_params  # noqa: PLC0415
-
+def _params_resonance(spec):
+    """The identified resonance (``dynamics.fn``, ``dynamics.zeta``) of a params file with ``dynamics``, or None:
+    the gains are checked against it whether or not it is compensated, as the controller node does."""
     from .stability import Resonance  # noqa: PLC0415
 
-    v = read_params(path).values
+    if "dynamics" not in spec.effects:
+        return None
+    v = spec.values
     fn, zeta = v.get("dynamics.fn"), v.get("dynamics.zeta")
     return Resonance(float(fn), float(zeta)) if fn and zeta else None
 
@@ -185,14 +176,18 @@ def run(args: argparse.Namespace) -> int:
 
     if not (math.isfinite(args.seconds) and 0 < args.seconds <= 600):
         raise ConfigError("--seconds must be in (0, 600]")
+    spec = _read_params(args.params) if args.params else None
+    if spec is not None and args.no_effects:
+        spec.effects = []
     if args.rate is None:
-        args.rate = _params_rate(args.params) if args.params else 2000.0
+        mdt = spec.config.get("dt") if spec is not None else None
+        args.rate = 1.0 / float(mdt) if mdt else 2000.0
     if not (math.isfinite(args.rate) and 10 <= args.rate <= 20000):
         raise ConfigError("--rate must be in [10, 20000] Hz")
     ref = parse_reference(args.reference)
     comp = None
-    if args.params:
-        model, comp = _params_model(args.params, args.rate, args.no_effects)
+    if spec is not None:
+        model, comp = _params_model(spec, args.params, args.rate)
     else:
         model = pea_default()
     model = mismatched(model, args.mismatch) if args.mismatch else model
@@ -204,8 +199,8 @@ def run(args: argparse.Namespace) -> int:
         fn, zeta = _resonance(args.resonance)
         plant = _resonant(args.rate, args.seed, fn, zeta)
         resonance = Resonance(fn, zeta)
-    elif comp is not None and "dynamics" in comp.unused and args.params:
-        resonance = _params_resonance(args.params)  # an identified resonance: the gains are checked against it
+    elif spec is not None:
+        resonance = _params_resonance(spec)
     if resonance is not None:
         stab = guard(args.algorithm, gains if gains is not None or args.algorithm == "open_loop" else
                      make_controller(args.algorithm, model, 1.0 / args.rate).gains, model, 1.0 / args.rate,
