@@ -65,9 +65,9 @@ def track(spec, scenario: str, alg: str, ref: str, seconds: float, seed: int = 5
         from hyst_control.dmrac import DMRACGains
         from hyst_control.dppc import DPPCGains
         from hyst_control.pid import PIDGains
-        from hyst_control.stability import Resonance, guard
+        from hyst_control.stability import guard, identified_resonance
 
-        res = Resonance(float(spec.values["dynamics.fn"]), float(spec.values["dynamics.zeta"]))
+        res = identified_resonance(spec.effects, spec.values)
         default = {"dppc": DPPCGains(), "dmrac": DMRACGains(), "pid": PIDGains()}[alg]
         gains = guard(alg, default, model, 1.0 / RATE, res).gains
     c = make_controller(alg, model, 1.0 / RATE, gains=gains, compensation=comp)

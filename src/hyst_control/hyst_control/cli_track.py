@@ -108,18 +108,6 @@ def _params_model(spec, path: str, rate: float):
     return model, comp if comp.used or comp.unused else Compensation()
 
 
-def _params_resonance(spec):
-    """The identified resonance (``dynamics.fn``, ``dynamics.zeta``) of a params file with ``dynamics``, or None:
-    the gains are checked against it whether or not it is compensated, as the controller node does."""
-    from .stability import Resonance  # noqa: PLC0415
-
-    if "dynamics" not in spec.effects:
-        return None
-    v = spec.values
-    fn, zeta = v.get("dynamics.fn"), v.get("dynamics.zeta")
-    return Resonance(float(fn), float(zeta)) if fn and zeta else None
-
-
 def _plant(scenario: str, rate: float, seed: int):
     """The embedded stage with a hidden-effect scenario (a file, or a name shipped with hyst_sim)."""
     from pathlib import Path  # noqa: PLC0415
@@ -172,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
     from .dmrac import DMRACGains  # noqa: PLC0415
     from .dppc import DPPCGains  # noqa: PLC0415
     from .pid import PIDGains  # noqa: PLC0415
-    from .stability import Resonance, guard  # noqa: PLC0415
+    from .stability import Resonance, guard, identified_resonance  # noqa: PLC0415
 
     if not (math.isfinite(args.seconds) and 0 < args.seconds <= 600):
         raise ConfigError("--seconds must be in (0, 600]")
@@ -199,8 +187,8 @@ def run(args: argparse.Namespace) -> int:
         fn, zeta = _resonance(args.resonance)
         plant = _resonant(args.rate, args.seed, fn, zeta)
         resonance = Resonance(fn, zeta)
-    elif spec is not None:
-        resonance = _params_resonance(spec)
+    elif spec is not None:  # an identified resonance: the gains are checked against it, as the node does
+        resonance = identified_resonance(spec.effects, spec.values)
     if resonance is not None:
         stab = guard(args.algorithm, gains if gains is not None or args.algorithm == "open_loop" else
                      make_controller(args.algorithm, model, 1.0 / args.rate).gains, model, 1.0 / args.rate,

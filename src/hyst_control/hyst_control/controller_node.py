@@ -37,7 +37,7 @@ from .limits import GMA_LIMITS, PEA_LIMITS, CommandLimits
 from .loop import ALGORITHMS, make_controller
 from .reference import parse_reference
 from .controller_settings import GAINS, MODEL_KEYS, ControllerSettings, cached_guard, profile_model
-from .stability import POLICIES, Resonance, StabilityVerdict
+from .stability import POLICIES, StabilityVerdict, identified_resonance
 
 __all__ = ["ControllerNode", "ControllerSettings", "main"]
 
@@ -171,10 +171,9 @@ class ControllerNode(AtomicParametersNode):
             effects = ()
         evals = tuple((k, get(f"model.{k}")) for k in self._effect_keys if k.split(".")[0] in effects)
         policy = str(get("stability.policy"))
-        fn = _F(get("model.dynamics.fn")) if "dynamics" in effects else 0.0  # the identified resonance, if any
         if policy not in POLICIES:
             raise ControlError(f"stability.policy must be one of {', '.join(POLICIES)}, got {policy!r}")
-        res = Resonance(fn, _F(get("model.dynamics.zeta"))) if fn > 0 else None
+        res = identified_resonance(effects, dict(evals))
         stab = cached_guard(alg, gains.get(alg), model, 1.0 / rate, res, policy, _F(get("stability.gain_margin")),
                       (_F(get("v_min")), _F(get("v_max"))))  # StabilityError (a ControlError) = rejected
         s = ControllerSettings(

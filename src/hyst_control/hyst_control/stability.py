@@ -44,7 +44,7 @@ from .dppc import DPPCGains
 from .errors import ConfigError
 from .pid import PIDGains
 
-__all__ = ["Resonance", "LoopCheck", "StabilityVerdict", "StabilityError", "POLICIES", "resonance_tf",
+__all__ = ["Resonance", "identified_resonance", "LoopCheck", "StabilityVerdict", "StabilityError", "POLICIES", "resonance_tf",
            "controller_tf", "plant_tf", "closed_loop_poles", "check_loop", "derate", "guard"]
 
 POLICIES = ("derate", "warn", "refuse")
@@ -65,6 +65,15 @@ class Resonance:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fn) and self.fn > 0 and math.isfinite(self.zeta) and self.zeta > 0):
             raise ConfigError("a resonance needs fn > 0 Hz and zeta > 0")
+
+
+def identified_resonance(effects, values) -> Resonance | None:
+    """The stage resonance a model holds: ``dynamics`` in ``effects`` with ``dynamics.fn`` and ``dynamics.zeta``
+    in ``values`` (SI); None when it has none. The one reading the node, ``hyst track`` and the benches share."""
+    if "dynamics" not in effects:
+        return None
+    fn, zeta = values.get("dynamics.fn"), values.get("dynamics.zeta")
+    return Resonance(float(fn), float(zeta)) if fn and zeta else None
 
 
 @dataclass(frozen=True)
