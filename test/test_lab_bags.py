@@ -109,6 +109,12 @@ class Probe:
         rclpy.try_shutdown(context=self.ctx)
 
 
+def _gaps(ns: list[int], period: int) -> list[tuple[int, int]]:
+    """(sample index before, samples missing) of every gap in sorted stamps."""
+    d = np.diff(ns)
+    return [(int(ns[i] // period), int(d[i] // period - 1)) for i in np.flatnonzero(d != period)][:10]
+
+
 def _excite_args(**kw) -> list[str]:
     return [a for k, v in kw.items() for a in ("-p", f"{k}:={v}")]
 
@@ -237,7 +243,48 @@ def test_lockstep_bag_driven_by_the_controller_starts_at_sample_0_and_fits(tmp_p
     s_ns = sorted({_stamp_ns(m) for m in _messages(bag, "/stage/state", JointState)})
     c_ns = sorted({_stamp_ns(m) for m in _messages(bag, "/stage/command", JointState)})
     period = int(round(1e9 / RATE))
-    assert s_ns[0] == 0 and np.array_equal(np.diff(s_ns), np.full(len(s_ns) - 1, period)), s_ns[:5]
+    assert s_ns[0] == 0 and np.array_equal(np.diff(s_ns), np.full(len(s_ns) - 1, period)), _gaps(s_ns, period)
+    # the first command may precede the recorder's discovery of the controller; none is lost after it
+    assert np.array_equal(np.diff(c_ns), np.full(len(c_ns) - 1, period)), _gaps(c_ns, period)
     print("first recorded command answers sample", c_ns[0] // period)  # shown with -rP
     fit = _hyst_fit(bag, tmp_path / "p.yaml")
     assert fit.returncode == 0, fit.stderr
+
+
+def test_lockstep_waits_for_a_subscriber_slower_than_the_loop(tmp_path):
+    """A reliable keep-all reader slower than the lockstep loop (a recorder on a loaded machine) gets every sample.
+
+    The reader takes ~2 ms per message, slower than the loop, so its backlog fills its history, and it stalls for
+    0.5 s every 1000 messages; a keep-last publisher then drops the samples the stalled reader has not
+    acknowledged within 100 ms (the sim lost samples so); lockstep must wait for the reader instead. The controller's commands, read the same slow way, are complete after the first too.
+    """
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    lab, probe = Lab(tmp_path), Probe()
+    keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    states: list[int] = []
+    commands: list[int] = []
+
+    def slow(into):
+        def cb(m) -> None:
+            into.append(_stamp_ns(m))
+            # slower than the loop, and now and then stalled (a busy machine descheduling the recorder)
+            time.sleep(0.5 if len(into) % 1000 == 0 else 0.002)
+        return cb
+
+    probe.node.create_subscription(JointState, "/stage/state", slow(states), keep_all)
+    probe.node.create_subscription(JointState, "/stage/command", slow(commands), keep_all)
+    try:
+        lab.start("sim", "hyst_sim_node", "--ros-args", "-p", f"rate:={RATE}", "-p", "mode:=lockstep",
+                  "-p", "wait_for_subscribers:=2")
+        lab.start("controller", "hyst_controller_node", "--ros-args", "-p", f"rate:={RATE}", "-p", "algorithm:=pid",
+                  "-p", "reference:=sine:5", "-p", "watchdog_periods:=1000000")
+        assert probe.spin_until(lambda: len(states) >= 3000 and len(commands) >= 2000, 600.0), (
+            len(states), len(commands), lab.log("sim"))
+    finally:
+        lab.stop()
+        probe.close()
+    period = int(round(1e9 / RATE))
+    s_ns, c_ns = sorted(set(states)), sorted(set(commands))
+    assert s_ns[0] == 0 and np.array_equal(np.diff(s_ns), np.full(len(s_ns) - 1, period)), _gaps(s_ns, period)
+    assert np.array_equal(np.diff(c_ns), np.full(len(c_ns) - 1, period)), _gaps(c_ns, period)

@@ -74,9 +74,11 @@ class ControllerNode(AtomicParametersNode):
         self._stats: dict[str, list] = {}  # algorithm -> [n, sum e², max |e|]
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
-        self._cmd_pub = self.create_publisher(JointState, "/stage/command", 10)
+        # deep history: a recorder slow for a moment (lockstep runs at the pace of the slowest reliable reader of
+        # /stage/state, which can be ~1000 samples behind) must not lose commands; never blocks the loop
+        self._cmd_pub = self.create_publisher(JointState, "/stage/command", 10000)
         self._warned_commanders = False
-        self._state_pub = self.create_publisher(JointState, "/controller/state", 10)
+        self._state_pub = self.create_publisher(JointState, "/controller/state", 1000)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(JointState, "/stage/state", self._on_state, 10)
         self.create_subscription(JointState, "/stage/reference", self._on_reference, 10)

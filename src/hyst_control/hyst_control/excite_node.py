@@ -43,7 +43,7 @@ class ExciteNode(AtomicParametersNode):
         self.answered = 0
         self.add_on_set_parameters_callback(
             lambda _p: SetParametersResult(successful=False, reason="excitation parameters apply at start only"))
-        self._pub = self.create_publisher(JointState, "/stage/command", 1000)
+        self._pub = self.create_publisher(JointState, "/stage/command", 10000)  # as the controller's: see there
         self.create_subscription(JointState, "/stage/state", self._on_state, 1000)
         ex = self.excitation
         self.get_logger().info(
