@@ -35,14 +35,18 @@ def _plant(scenario: str, seed: int):
     return SimPlant(Plant(PlantConfig.from_scenario(scenario_dir() / f"hidden_{name}.yaml", base=base)))
 
 
-def identify(scenario: str, seed: int = 11):
-    """Open-loop excitation → record → diagnose; returns (base spec, extended spec, diagnosis)."""
+def identify(scenario, seed: int = 11, excitation=None):
+    """Open-loop excitation → record → diagnose; returns (base spec, extended spec, diagnosis).
+
+    ``scenario``: a shipped scenario's name, or a callable ``seed -> plant`` (any stage, e.g. a randomised one);
+    ``excitation``: an :class:`~hyst_control.excitation.ExcitationSpec` (default: the node's default at 2 kHz).
+    """
     from hyst_control.excitation import ExcitationSpec, build_excitation
     from hyst_model.diagnose.diagnose import diagnose
     from hyst_model.io import spec_from_model
 
-    ex = build_excitation(ExcitationSpec(dt=1.0 / RATE, seed=seed))
-    plant = _plant(scenario, seed)
+    ex = build_excitation(excitation or ExcitationSpec(dt=1.0 / RATE, seed=seed))
+    plant = _plant(scenario, seed) if isinstance(scenario, str) else scenario(seed)
     plant.reset(float(ex.u[0]))
     y = np.array([plant.step(float(v)) for v in ex.u])
     d = diagnose(ex.t, ex.u, y)
@@ -51,7 +55,9 @@ def identify(scenario: str, seed: int = 11):
     return base, ext, d
 
 
-def track(spec, scenario: str, alg: str, ref: str, seconds: float, seed: int = 5) -> float:
+def track(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=None) -> float:
+    """RMSE (m) of ``alg`` with the model and compensation of ``spec`` tracking ``ref`` (spec string or
+    Reference) on a fresh stage of ``scenario`` (name or ``seed -> plant``); NaN if the loop diverged."""
     from hyst_control.compensation import from_params
     from hyst_control.errors import ControlError
     from hyst_control.loop import make_controller, mismatched, run_closed_loop
@@ -69,17 +75,20 @@ def track(spec, scenario: str, alg: str, ref: str, seconds: float, seed: int = 5
 
         res = identified_resonance(spec.effects, spec.values)
         default = {"dppc": DPPCGains(), "dmrac": DMRACGains(), "pid": PIDGains()}[alg]
-        gains = guard(alg, default, model, 1.0 / RATE, res).gains
-    c = make_controller(alg, model, 1.0 / RATE, gains=gains, compensation=comp)
+        v_range = (limits.v_min, limits.v_max) if limits is not None else (0.0, 150.0)
+        gains = guard(alg, default, model, 1.0 / RATE, res, v_range=v_range).gains
+    c = make_controller(alg, model, 1.0 / RATE, limits=limits, gains=gains, compensation=comp)
     try:
-        r = run_closed_loop(c, ref, seconds, plant=_plant(scenario, seed), settle=0.5)
+        plant = _plant(scenario, seed) if isinstance(scenario, str) else scenario(seed)
+        r = run_closed_loop(c, ref, seconds, plant=plant, settle=0.5)
     except ControlError:
         return float("nan")
     if not r.finite:
         return float("nan")
     e = r.y - r.r
-    if ref == "step":  # as bench_tracking and the thesis: the 50 ms after the step are left out
-        t0 = parse_reference(ref).t0
+    shape = ref if isinstance(ref, str) else ref.shape
+    if shape == "step":  # as bench_tracking and the thesis: the 50 ms after the step are left out
+        t0 = parse_reference(ref).t0 if isinstance(ref, str) else ref.t0
         e = e[~((r.t >= t0) & (r.t < t0 + 0.05))]
     return float(np.sqrt(np.mean(e ** 2)))
 
