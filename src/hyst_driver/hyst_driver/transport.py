@@ -484,7 +484,12 @@ class DeviceLink:
     def ramp_to_safe(self, max_seconds: float = 5.0, sleep: Callable[[float], None] = time.sleep) -> bool:
         """Blocking: ramp the output to ``v_safe`` at the slew limit, then stop streaming (shutdown path).
 
-        Returns True when ``v_safe`` was written, False when the link was down or the time ran out.
+        Returns True once the amplifier's read-back shows ``v_safe`` applied, False when the link was down or the
+        time ran out. Written is not enough: under load a pty (and a USB serial bridge) can hold written bytes
+        for a while, and closing the port then drops them — measured in 2 of 20 fault-test runs beside three CPU
+        hogs, the device was left at 74 V and 51 V after "ramped" (there, the ramp had not even begun: see below).
+        Until the read-back confirms, the link keeps servicing, so a write the device never applied is re-ramped
+        from what it does apply.
         """
         with self._lock:
             self.closing = True
@@ -492,8 +497,12 @@ class DeviceLink:
         t_end = self.clock() + max_seconds
         while self.clock() < t_end:
             self.service()
-            if self.health.state == "running" and self.limiter.settled \
-                    and self.health.commanded_v == self.limiter.value:
+            h, lim = self.health, self.limiter
+            # the target must be v_safe itself: right after closing began, the limiter can still sit settled at
+            # the last command (the watchdog's target reaches it on a later write), which once ended the "ramp"
+            # with the device left at 74 V
+            if h.state == "running" and lim.settled and abs(lim.target - lim.limits.v_safe) <= lim.limits.quantum \
+                    and h.commanded_v == lim.value and abs(h.applied_v - lim.value) <= max(1e-3, lim.limits.quantum):
                 try:
                     self.transport.write(self.adapter.stop())
                 except LinkError:

@@ -156,3 +156,21 @@ def test_commands_after_the_shutdown_ramp_began_are_never_written(make_rig, test
     assert rig.run_until(lambda: rig.device.received[-1] == test_limits.v_safe and len(rig.device.received) >= n,
                          DEADLINE, command=False)
     assert 84.0 not in rig.device.received[n:]
+
+
+@pytest.mark.parametrize("protocol", ["ascii", "gcs"])
+def test_shutdown_ramp_reports_success_only_once_the_device_applies_v_safe(make_rig, test_limits, protocol):
+    """``ramp_to_safe`` True means the amplifier's read-back shows v_safe, not that the link was settled.
+
+    Right after closing began, the limiter sat settled at the last command (80 V here); the former check took
+    that for the end of the ramp and returned at once, leaving the device at 74 V and 51 V in two of 20 fault
+    tests under load.
+    """
+    rig = make_rig(protocol, seed=8, command_timeout=10.0)
+    assert rig.run_until(lambda: rig.link.health.state == "running", DEADLINE, command=False)
+    rig.link.command(80.0)
+    assert rig.run_until(lambda: rig.device.plant.u_applied == 80.0 and rig.link.limiter.settled, DEADLINE,
+                         command=False)
+    assert rig.link.ramp_to_safe(5.0)
+    assert rig.link.health.applied_v == pytest.approx(test_limits.v_safe, abs=1e-3)
+    assert rig.device.plant.u_applied == pytest.approx(test_limits.v_safe, abs=1e-3)
