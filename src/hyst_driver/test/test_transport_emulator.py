@@ -18,7 +18,7 @@ from hyst_driver.errors import LinkError
 from hyst_driver.transport import SerialTransport
 
 #: Deadline (s) of every wait: only decides when a hung test gives up.
-DEADLINE = 10.0
+DEADLINE = 30.0  # generous: only a failing run waits it out (10 s ran out at load 20)
 
 
 def _read_until(t: SerialTransport, pred, timeout: float = DEADLINE) -> bytes:

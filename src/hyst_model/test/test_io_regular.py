@@ -102,3 +102,17 @@ def test_hyst_fit_reads_a_lockstep_bag_with_missed_periods_as_it_is(tmp_path, ca
     assert obj["rmse"] < 20e-9                      # the noise is 2 nm: the bridge did not spoil the fit
     assert main(["fit", str(bag), "--gaps", "refuse", "--quiet"]) == 2
     assert "--gaps auto" in capsys.readouterr().err
+
+
+def test_auto_keeps_the_segment_with_the_excitation_not_the_longer_rest_after_it():
+    """A realtime run: excitation, a long stall, then the stage resting at v_safe for longer than it was excited
+    (the recorder ran on). The longest segment holds nothing to identify; auto keeps the excited one."""
+    t, u, y = _stage(3000)
+    u = u.copy()
+    u[1200:] = 0.0                                 # rest after the excitation
+    keep = np.r_[0:1000, 1100:3000]                # a 100-period stall: cut
+    rec, notes = regularise(Record(t[keep], u[keep], y[keep]), "auto")
+    assert len(rec) == 1000 and rec.t[0] == 0.0
+    assert any("varies most" in n for n in notes), notes
+    rec, _ = regularise(Record(t[keep], u[keep], y[keep]), "longest")   # as asked: the longest
+    assert len(rec) == 1900

@@ -11,8 +11,10 @@ other topics are subscribed when the ROS graph shows them (checked every 0.2 s; 
 seconds next to a 1 kHz publisher, so give ``TOPIC:pkg/msg/Type`` to start at once). Subscriptions are reliable
 (keep-all history) and switch to best effort when a best-effort publisher appears; callbacks only queue the bytes
 and a writer thread writes them, so a slow disk or compression never makes the subscription drop samples.
-SIGINT/SIGTERM or ``--duration`` stop recording and finalise the bag (metadata and MCAP summary); further signals
-during finalisation are reported and ignored, so the bag is always readable. An existing output directory is
+SIGINT/SIGTERM or ``--duration`` stop recording and finalise the bag (metadata and MCAP summary). After a signal
+the recorder first takes what the middleware has already delivered (until 0.5 s pass without a message; a second
+signal stops that at once), so a run that ends faster than a loaded machine records keeps its tail; further
+signals during finalisation are reported and ignored, so the bag is always readable. An existing output directory is
 refused. To never miss the start of a lockstep run, start the recorder first and give the sim
 ``-p wait_for_subscribers:=2`` (it then waits for the recorder and the controller/excitation before sample 0);
 the recorder prints ``recording`` once its contract-topic subscriptions exist.
@@ -29,6 +31,7 @@ from pathlib import Path
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
+from rclpy.signals import SignalHandlerOptions
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -76,6 +79,7 @@ class RecordNode(Node):
         self._writer_thread = threading.Thread(target=self._drain, name="hyst_bag_writer", daemon=True)
         self._writer_thread.start()
         self.write_errors = 0
+        self.received = 0  # messages taken from the middleware
         self.create_timer(0.2, self._discover)
         self._discover()
 
@@ -144,6 +148,7 @@ class RecordNode(Node):
 
     def _writer_for(self, topic: str):
         def write(data: bytes) -> None:
+            self.received += 1
             self._queue.put((topic, self.get_clock().now().nanoseconds, data))
         return write
 
@@ -177,13 +182,24 @@ def main(args=None) -> int:
         print(f"hyst_bag_record: {err}", file=sys.stderr)
         return 2
     previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-    rclpy.init(args=args)
+    main_thread = threading.current_thread() is threading.main_thread()
+    stop = threading.Event()
+    if main_thread:
+        # our own handlers instead of rclpy's, which shut the context down at once: the messages the
+        # middleware has already delivered must still be taken and written (drain, below)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda _s, _f: stop.set())
+    else:
+        rclpy.init(args=args)
     node = None
     try:
         node = RecordNode(writer, a.topics, a.duration)
         print(f"hyst_bag_record: recording -> {out}", flush=True)
-        while rclpy.ok() and not node.done:
+        while rclpy.ok() and not node.done and not stop.is_set():
             rclpy.spin_once(node, timeout_sec=0.1)
+        if stop.is_set() and rclpy.ok():
+            _drain(node, stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
@@ -202,6 +218,23 @@ def main(args=None) -> int:
         for sig, old in previous.items():
             signal.signal(sig, signal.SIG_IGN if args is None else old)
     return 1 if lost else 0
+
+
+def _drain(node: RecordNode, stop: threading.Event, quiet: float = 0.5, longest: float = 30.0) -> None:
+    """After the stop signal: take what the middleware already delivered, until ``quiet`` s pass without a
+    message (or ``longest`` s, or a second signal). A lockstep run ends faster than a recorder on a loaded machine
+    writes: stopping at once lost the last 3100 of 4000 samples of a demo bag."""
+    stop.clear()  # a second signal ends the drain
+    print("hyst_bag_record: stopping: taking the messages already delivered (Ctrl-C again to stop at once)",
+          file=sys.stderr, flush=True)
+    end = time.monotonic() + longest
+    last, quiet_since = node.received, time.monotonic()
+    while not stop.is_set() and time.monotonic() < end and rclpy.ok():
+        rclpy.spin_once(node, timeout_sec=0.05)
+        if node.received != last:
+            last, quiet_since = node.received, time.monotonic()
+        elif time.monotonic() - quiet_since >= quiet:
+            return
 
 
 def _ignore_signals_while_finalising() -> None:

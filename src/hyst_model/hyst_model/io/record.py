@@ -149,12 +149,23 @@ class Record:
             out.append((start, n))
         return out
 
-    def longest_segment(self, *, max_gap: float = 1.5) -> "Record":
-        """The longest regular, finite stretch (metadata records how much was dropped)."""
+    def longest_segment(self, *, max_gap: float = 1.5, by: str = "length") -> "Record":
+        """The longest regular, finite stretch (metadata records how much was dropped).
+
+        ``by="variation"`` keeps instead the stretch whose input varies most (sum of squared deviations of ``u``
+        from its mean; ties by length): on a rig's record the longest stretch is often the rest after the
+        excitation, which holds nothing to identify.
+        """
         segs = self.segments(max_gap=max_gap)
         if not segs:
             raise DataError(f"{self.source}: no finite samples")
-        a, b = max(segs, key=lambda s: s[1] - s[0])
+        if by == "variation":
+            def score(s):
+                u = self.u[s[0]:s[1]]
+                return (float(np.sum((u - u.mean()) ** 2)), s[1] - s[0])
+            a, b = max(segs, key=score)
+        else:
+            a, b = max(segs, key=lambda s: s[1] - s[0])
         r = self.slice(a, b)
         r.meta["segment"] = [int(a), int(b)]
         r.meta["dropped_samples"] = int(len(self) - (b - a))

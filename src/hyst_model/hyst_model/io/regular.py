@@ -9,8 +9,8 @@ Two artefacts of a live rig make a record irregular, and neither is the user's f
   stage keeps moving under the voltage the DAC holds. Over such a gap the input is known exactly (held), so a
   short gap is *bridged*: the missing sample times are put back on the grid with ``u`` held and ``y``
   interpolated linearly (those few ``y`` values are estimates; ``meta['bridged']`` holds their indices).
-  A long gap (more than ``max_bridge`` periods) is not bridged: the record is cut there and the longest
-  regular segment kept.
+  A long gap (more than ``max_bridge`` periods) is not bridged: the record is cut there and the regular segment
+  whose input varies most is kept (the longest is often the rest after the excitation: nothing to identify).
 
 Time running backwards is never repaired (it means a merged or corrupted file) and stays an error.
 """
@@ -23,7 +23,8 @@ from .record import Record
 
 __all__ = ["GAP_POLICIES", "regularise"]
 
-#: ``auto``: bridge gaps of at most ``max_bridge`` periods, keep the longest segment between longer ones;
+#: ``auto``: bridge gaps of at most ``max_bridge`` periods, keep the segment between longer ones whose input varies
+#: most;
 #: ``bridge``: the same, but a longer gap is an error; ``longest``: keep the longest regular segment;
 #: ``refuse`` (alias ``error``): any gap or repeated stamp is an error.
 GAP_POLICIES = ("auto", "bridge", "longest", "refuse", "error")
@@ -126,10 +127,10 @@ def regularise(rec: Record, gaps: str = "auto", *, max_gap: float = 1.5, max_bri
     if short.size:
         rec = _bridge(rec, dt, short, notes)
     if long_.size:
-        cut = rec.longest_segment(max_gap=max_gap)
+        cut = rec.longest_segment(max_gap=max_gap, by="variation")
         a, b = cut.meta["segment"]
-        notes.append(f"{long_.size} gap(s) longer than {max_bridge} periods: kept the longest regular segment, "
-                     f"samples {a}–{b} of {len(rec)}")
+        notes.append(f"{long_.size} gap(s) longer than {max_bridge} periods: kept the regular segment whose input "
+                     f"varies most, samples {a}–{b} of {len(rec)}")
         if "bridged" in rec.meta:
             br = np.asarray(rec.meta["bridged"], dtype=int)
             cut.meta["bridged"] = (br[(br >= a) & (br < b)] - a).tolist()
