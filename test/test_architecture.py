@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
-PACKAGES = ("hyst_common", "hyst_model", "hyst_sim", "hyst_control", "hyst_driver")
+PACKAGES = ("hyst_common", "hyst_model", "hyst_sim", "hyst_control", "hyst_driver", "hyst_bringup")
 #: Which hyst packages each package may import: arrows point down only.
 ALLOWED = {
     "hyst_common": set(),
@@ -18,14 +18,14 @@ ALLOWED = {
     "hyst_sim": {"hyst_common", "hyst_model"},
     "hyst_control": {"hyst_common", "hyst_model"},
     "hyst_driver": {"hyst_common"},
+    "hyst_bringup": {"hyst_common", "hyst_model", "hyst_sim", "hyst_control", "hyst_driver"},
 }
 #: Imports that break ALLOWED today, file by file (issue #12: harnesses to a top package, hardware facts to the
 #: bottom). A ratchet: a new violation fails, and so does a listed one that is gone (remove it here).
 KNOWN = {
     ("hyst_control/cli_track.py", "hyst_sim"), ("hyst_control/composed.py", "hyst_sim"),
-    ("hyst_control/controller_settings.py", "hyst_sim"), ("hyst_control/demo.py", "hyst_sim"),
+    ("hyst_control/demo.py", "hyst_sim"),
     ("hyst_control/loop.py", "hyst_sim"),
-    ("hyst_driver/driver_node.py", "hyst_sim"), ("hyst_driver/emulator.py", "hyst_sim"),
 }
 #: Besides the *_node.py modules, the only modules that may import rclpy.
 RCLPY_OK = {"hyst_common/node.py", "hyst_control/composed.py"}

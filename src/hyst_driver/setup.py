@@ -21,7 +21,6 @@ setup(
     entry_points={
         'console_scripts': [
             'hyst_driver_node = hyst_driver.driver_node:main',
-            'hyst_emulator = hyst_driver.emulator:main',
         ],
     },
 )

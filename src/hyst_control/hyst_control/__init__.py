@@ -1,15 +1,16 @@
 """hyst_control: DPPC, DMRAC, PID and open-loop controllers for hysteretic actuators, references, the closed loop.
 
-Numerical core (no rclpy): :mod:`.base`, :mod:`.dppc`, :mod:`.dmrac`, :mod:`.pid`, :mod:`.limits`,
+Numerical core (no rclpy): :mod:`.base`, :mod:`.dppc`, :mod:`.dmrac`, :mod:`.pid` (command limits: :mod:`hyst_common.limits`),
 :mod:`.reference`, :mod:`.loop`. Thin nodes: ``controller_node``, ``reference_node``, ``composed``.
 """
 import hyst_common  # noqa: F401  first: sets single-threaded BLAS before numpy loads (hyst_common.blas)
+from hyst_common.limits import CommandLimits
+from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
 
 from .base import BaseController, Controller, hand_over
 from .dmrac import DMRAC, TABLE53, DMRACGains
 from .dppc import DPPC, THESIS_TABLE42, DPPCGains
 from .errors import ConfigError, ControlError, LoopError, ReferenceError_
-from .limits import GMA_LIMITS, PEA_LIMITS, CommandLimits
 from .loop import ALGORITHMS, LoopResult, make_controller, mismatched, run_closed_loop
 from .pid import PID, OpenLoop, PIDGains
 from .reference import TABLE_REFERENCES, Reference, parse_reference

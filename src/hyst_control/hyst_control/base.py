@@ -24,10 +24,11 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numba import njit
 
+from hyst_common.limits import CommandLimits
+from hyst_common.profiles import PEA_LIMITS
 from hyst_model.core import MBWParams
 
 from .errors import ConfigError
-from .limits import PEA_LIMITS, CommandLimits
 
 __all__ = ["Controller", "BaseController", "ModelBased", "hand_over", "mu_select", "invert_nu", "check_model"]
 

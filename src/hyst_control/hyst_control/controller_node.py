@@ -25,15 +25,16 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from hyst_model.core import MBWParams
+from hyst_common.limits import CommandLimits
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
+from hyst_model.core import MBWParams
 
 from .base import check_model, hand_over
 from .compensation import effect_parameters
 from .dmrac import TABLE53
 from .errors import ControlError
-from .limits import GMA_LIMITS, PEA_LIMITS, CommandLimits
 from .loop import ALGORITHMS, make_controller
 from .reference import parse_reference
 from .controller_settings import GAINS, MODEL_KEYS, ControllerSettings, cached_guard, profile_model

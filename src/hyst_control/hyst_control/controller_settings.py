@@ -6,12 +6,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 
-from hyst_model.core import PARAM_NAMES, MBWParams, pea_default
+from hyst_common.limits import CommandLimits
+from hyst_model.core import PARAM_NAMES, MBWParams, pea_default, stage_model
 
 from .compensation import Compensation, plan_compensation
 from .dmrac import DMRACGains
 from .dppc import DPPCGains
-from .limits import CommandLimits
 from .pid import PIDGains
 from .reference import Reference
 from .stability import StabilityVerdict, guard
@@ -87,9 +87,9 @@ class ControllerSettings:
 
 
 def profile_model(profile: str) -> MBWParams:
-    """The sim's default stage model for a profile (the embedded default when hyst_sim is absent)."""
+    """The default stage model for a profile (:func:`hyst_model.core.stage_model`, as the sim's); an unknown
+    profile falls back to the embedded default (the profile's limits report the bad name)."""
     try:
-        from hyst_sim.profiles import get_profile  # noqa: PLC0415 - sibling package, numerical core
-        return get_profile(profile).model()
-    except Exception:  # noqa: BLE001 - unknown profile is reported by the limits, the model falls back
+        return stage_model(profile)
+    except ValueError:
         return pea_default()

@@ -32,11 +32,11 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from hyst_common.limits import CommandLimits
 from hyst_model.core import MBWParams, mbw_step
 
 from .base import ModelBased, invert_nu
 from .errors import ConfigError
-from .limits import CommandLimits
 
 __all__ = ["DMRACGains", "DMRAC", "TABLE53", "ESTIMATE_NAMES", "dmrac_adapt"]
 

@@ -32,11 +32,11 @@ from dataclasses import dataclass
 
 from numba import njit
 
+from hyst_common.limits import CommandLimits
 from hyst_model.core import MBWParams
 
 from .base import ModelBased, invert_nu
 from .errors import ConfigError
-from .limits import CommandLimits
 
 __all__ = ["DPPCGains", "DPPC", "THESIS_TABLE42", "dppc_nu"]
 

@@ -19,10 +19,10 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from sensor_msgs.msg import JointState
 
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
 
 from .errors import ControlError
 from .excitation import PARTS, ExcitationSpec, build_excitation
-from .limits import GMA_LIMITS, PEA_LIMITS
 
 __all__ = ["ExciteNode", "main"]
 

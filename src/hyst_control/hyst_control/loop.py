@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyst_common.limits import CommandLimits
+from hyst_common.profiles import PEA_LIMITS
 from hyst_model.core import MBWParams, pea_default
 
 from .base import BaseController
@@ -24,7 +26,6 @@ from .compensation import Compensation, wrap
 from .dmrac import DMRAC, DMRACGains
 from .dppc import DPPC, DPPCGains
 from .errors import ConfigError, ControlError, LoopError
-from .limits import PEA_LIMITS, CommandLimits
 from .pid import PID, OpenLoop, PIDGains
 from .reference import Reference, parse_reference
 

@@ -14,11 +14,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from hyst_common.limits import CommandLimits
 from hyst_model.core import MBWParams, mbw_step
 
 from .base import BaseController, ModelBased, invert_nu
 from .errors import ConfigError
-from .limits import CommandLimits
 
 __all__ = ["PIDGains", "PID", "OpenLoop"]
 

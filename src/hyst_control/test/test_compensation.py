@@ -38,7 +38,7 @@ def test_plan_refuses_missing_out_of_range_and_uninvertible_effects():
 
 
 def test_limits_set_on_the_wrapper_reach_the_law():
-    from hyst_control.limits import CommandLimits
+    from hyst_common.limits import CommandLimits
 
     c = make_controller("dppc", pea_default(), DT, compensation=_plan(["creep"], creep__gain=0.01))
     assert isinstance(c, Compensated)

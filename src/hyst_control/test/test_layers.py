@@ -3,7 +3,7 @@ import subprocess
 import sys
 
 CORE = ("hyst_control", "hyst_control.base", "hyst_control.dppc", "hyst_control.dmrac", "hyst_control.pid",
-        "hyst_control.limits", "hyst_control.reference", "hyst_control.loop", "hyst_control.cli_track",
+        "hyst_control.reference", "hyst_control.loop", "hyst_control.cli_track",
         "hyst_control.demo", "hyst_control.stability", "hyst_control.compensation", "hyst_control.controller_settings")
 
 

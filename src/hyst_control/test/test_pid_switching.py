@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from hyst_control.base import hand_over
-from hyst_control.limits import CommandLimits
+from hyst_common.limits import CommandLimits
 from hyst_control.loop import ALGORITHMS, default_plant, make_controller, mismatched, run_closed_loop
 from hyst_control.pid import PID, PIDGains
 from hyst_control.reference import parse_reference

@@ -52,7 +52,7 @@ from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .errors import SimError
 from .plant import Plant
-from .profiles import get_profile
+from hyst_common.profiles import V_SPAN, get_profile
 from .sim_settings import SimSettings, plant_config
 from .truth_effects import EFFECT_NAMES, Effects
 
@@ -129,16 +129,16 @@ class SimNode(AtomicParametersNode):
         d("rate", 1000.0, ParameterDescriptor(description="sample rate (Hz); 2000 needs a single process",
                                               floating_point_range=fp_range(1.0, 5000.0)))
         d("v_min", prof.v_min, ParameterDescriptor(description="lowest voltage applied (V), inside the profile",
-                                                   floating_point_range=fp_range(-5.0, 150.0)))
+                                                   floating_point_range=fp_range(*V_SPAN)))
         d("v_max", prof.v_max, ParameterDescriptor(description="highest voltage applied (V), inside the profile",
-                                                   floating_point_range=fp_range(-5.0, 150.0)))
+                                                   floating_point_range=fp_range(*V_SPAN)))
         d("slew_max", prof.slew_max, ParameterDescriptor(description="amplifier slew limit (V/s)",
                                                          floating_point_range=fp_range(1e-3, 1e8)))
         d("command_timeout", 0.2, ParameterDescriptor(
             description="no command for this long (s) -> ramp to v_safe (realtime mode)",
             floating_point_range=fp_range(1e-3, 3600.0)))
         d("v_safe", prof.v_safe, ParameterDescriptor(description="voltage at start and after a timeout (V)",
-                                                     floating_point_range=fp_range(-5.0, 150.0)))
+                                                     floating_point_range=fp_range(*V_SPAN)))
         d("safe_ramp_rate", 100.0, ParameterDescriptor(description="ramp rate towards v_safe after a timeout (V/s)",
                                                        floating_point_range=fp_range(1e-3, 1e8)))
         d("frame_id", "stage", ParameterDescriptor(description="header.frame_id of /stage/state"))
