@@ -24,7 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hyst_control.loop import ALGORITHMS, default_plant, make_controller, run_closed_loop
+from hyst_bringup.loop import default_plant, run_closed_loop
+
+from hyst_control.controllers import ALGORITHMS, make_controller
 from hyst_model.core import pea_default
 
 BIN = Path(sys.executable).parent

@@ -81,7 +81,7 @@ def draw_case(seed: int) -> StageCase:
 
 def plant_factory(case: StageCase, with_effects: bool = True):
     """``seed -> plant`` for the case (or its effect-free twin)."""
-    from hyst_control.loop import SimPlant
+    from hyst_bringup.loop import SimPlant
     from hyst_sim.plant import Plant, PlantConfig
 
     def make(seed: int):

@@ -26,7 +26,7 @@ ALGS = ("dppc", "dmrac", "pid", "open_loop")
 
 
 def _plant(scenario: str, seed: int):
-    from hyst_control.loop import SimPlant
+    from hyst_bringup.loop import SimPlant
     from hyst_sim.plant import Plant, PlantConfig
     from hyst_sim.scenario import scenario_dir
 
@@ -60,7 +60,8 @@ def track(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=N
     Reference) on a fresh stage of ``scenario`` (name or ``seed -> plant``); NaN if the loop diverged."""
     from hyst_control.compensation import from_params
     from hyst_control.errors import ControlError
-    from hyst_control.loop import make_controller, mismatched, run_closed_loop
+    from hyst_bringup.loop import run_closed_loop
+    from hyst_control.controllers import make_controller, mismatched
     from hyst_control.reference import parse_reference
 
     model, comp = from_params(spec, 1.0 / RATE)

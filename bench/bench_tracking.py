@@ -17,7 +17,8 @@ import numpy as np
 
 from hyst_control.dmrac import TABLE53, DMRAC, DMRACGains
 from hyst_control.dppc import DPPCGains
-from hyst_control.loop import default_plant, make_controller, mismatched, run_closed_loop
+from hyst_bringup.loop import default_plant, run_closed_loop
+from hyst_control.controllers import make_controller, mismatched
 from hyst_control.reference import TABLE_REFERENCES, parse_reference
 from hyst_model.core import pea_default
 

@@ -22,7 +22,9 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from hyst_control.loop import SimPlant, make_controller, run_closed_loop  # noqa: E402
+from hyst_bringup.loop import SimPlant, run_closed_loop  # noqa: E402
+
+from hyst_control.controllers import make_controller  # noqa: E402
 from hyst_control.reference import parse_reference  # noqa: E402
 from hyst_model.core import pea_default  # noqa: E402
 

@@ -23,9 +23,9 @@ REQUIRED = {
     "hyst_common": set(),
     "hyst_model": {"hyst", "hyst_ident_node", "hyst_residual_node"},
     "hyst_sim": {"hyst_sim_node", "hyst_bag_record", "hyst_bag_play"},
-    "hyst_control": {"hyst_controller_node", "hyst_reference_node", "hyst_loop_node"},
+    "hyst_control": {"hyst_controller_node", "hyst_reference_node"},
     "hyst_driver": {"hyst_driver_node"},
-    "hyst_bringup": {"hyst_emulator"},
+    "hyst_bringup": {"hyst_emulator", "hyst_loop_node"},
 }
 
 

@@ -15,12 +15,17 @@ setup(
     zip_safe=True,
     maintainer='hyst developers',
     maintainer_email='hyst@example.org',
-    description='The top of hyst: the device emulator on the simulated plant and the in-process harnesses.',
+    description='The top of hyst: the device emulator on the simulated plant, the in-process closed loop (hyst track), the single-process 2 kHz loop node and hyst demo.',
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'hyst_emulator = hyst_bringup.emulator:main',
+            'hyst_loop_node = hyst_bringup.composed:main',
+        ],
+        'hyst.commands': [
+            'track = hyst_bringup.cli_track:register',
+            'demo = hyst_bringup.demo:register',
         ],
     },
 )

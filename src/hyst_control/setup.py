@@ -22,12 +22,7 @@ setup(
         'console_scripts': [
             'hyst_controller_node = hyst_control.controller_node:main',
             'hyst_reference_node = hyst_control.reference_node:main',
-            'hyst_loop_node = hyst_control.composed:main',
             'hyst_excite_node = hyst_control.excite_node:main',
-        ],
-        'hyst.commands': [
-            'track = hyst_control.cli_track:register',
-            'demo = hyst_control.demo:register',
         ],
     },
 )

@@ -35,7 +35,7 @@ from .base import check_model, hand_over
 from .compensation import effect_parameters
 from .dmrac import TABLE53
 from .errors import ControlError
-from .loop import ALGORITHMS, make_controller
+from .controllers import ALGORITHMS, make_controller
 from .reference import parse_reference
 from .controller_settings import GAINS, MODEL_KEYS, ControllerSettings, cached_guard, profile_model
 from .stability import POLICIES, StabilityVerdict, identified_resonance

@@ -7,7 +7,8 @@ import pytest
 
 from hyst_control.compensation import Compensated, effect_parameters, plan_compensation
 from hyst_control.errors import ConfigError
-from hyst_control.loop import default_plant, make_controller, run_closed_loop
+from hyst_bringup.loop import default_plant, run_closed_loop
+from hyst_control.controllers import make_controller
 from hyst_model.core import pea_default
 
 RATE = 2000.0

@@ -17,7 +17,8 @@ from sensor_msgs.msg import JointState  # noqa: E402
 
 from hyst_control.controller_node import ControllerNode  # noqa: E402
 from hyst_control.errors import ControlError  # noqa: E402
-from hyst_control.loop import SimPlant, default_plant, mismatched  # noqa: E402
+from hyst_bringup.loop import SimPlant, default_plant  # noqa: E402
+from hyst_control.controllers import mismatched  # noqa: E402
 from hyst_model.core import MBWParams, pea_default  # noqa: E402
 
 pytestmark = pytest.mark.ros

@@ -6,7 +6,8 @@ import pytest
 
 from hyst_control.base import hand_over
 from hyst_common.limits import CommandLimits
-from hyst_control.loop import ALGORITHMS, default_plant, make_controller, mismatched, run_closed_loop
+from hyst_bringup.loop import default_plant, run_closed_loop
+from hyst_control.controllers import ALGORITHMS, make_controller, mismatched
 from hyst_control.pid import PID, PIDGains
 from hyst_control.reference import parse_reference
 from hyst_model.core import pea_default
