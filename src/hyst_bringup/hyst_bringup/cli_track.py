@@ -21,11 +21,8 @@ import sys
 from pathlib import Path
 
 from hyst_control.compensation import Compensation, from_params
-from hyst_control.controllers import ALGORITHMS, make_controller, mismatched
-from hyst_control.dmrac import DMRACGains
-from hyst_control.dppc import DPPCGains
+from hyst_control.controllers import ALGORITHMS, CONTROLLERS, make_controller, mismatched
 from hyst_control.errors import ConfigError
-from hyst_control.pid import PIDGains
 from hyst_control.reference import parse_reference
 from hyst_control.stability import Resonance, guard, identified_resonance
 from hyst_model.core import pea_default
@@ -171,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         model = pea_default()
     model = mismatched(model, args.mismatch) if args.mismatch else model
-    gains = _gains(args, {"dppc": DPPCGains, "dmrac": DMRACGains, "pid": PIDGains})
+    gains = _gains(args, {name: law.gains for name, law in CONTROLLERS.items() if law.gains is not None})
     plant = _plant(args.scenario, args.rate, args.seed) if args.scenario else default_plant(args.rate, args.seed)
     stab = None
     resonance = None

@@ -145,6 +145,15 @@ class BaseController:
 
     name = "base"
 
+    @classmethod
+    def create(cls, model: MBWParams, dt: float, limits: CommandLimits, gains=None, initial="model"):
+        """Build from the uniform arguments of :func:`hyst_control.controllers.make_controller`.
+
+        Each law maps them to its own constructor and ignores what it does not use (``gains`` None = its
+        defaults; ``initial``: DMRAC's initial estimates).
+        """
+        raise NotImplementedError(f"{cls.__name__} cannot be built by name")
+
     def __init__(self, dt: float, limits: CommandLimits | None = None) -> None:
         if not (dt > 0 and math.isfinite(dt)):
             raise ConfigError("dt must be a positive number of seconds")

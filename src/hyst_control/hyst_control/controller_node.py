@@ -94,7 +94,7 @@ class ControllerNode(AtomicParametersNode):
         d("profile", "pea", ParameterDescriptor(description="limit defaults: pea (0-150 V) | gma (+-5 V)",
                                                 read_only=True))
         lim = GMA_LIMITS if self.get_parameter("profile").value == "gma" else PEA_LIMITS
-        d("algorithm", "dppc", ParameterDescriptor(description="dppc | dmrac | pid | open_loop (bumpless switch)"))
+        d("algorithm", "dppc", ParameterDescriptor(description=" | ".join(ALGORITHMS) + " (bumpless switch)"))
         d("rate", 1000.0, ParameterDescriptor(description="expected state rate (Hz)", floating_point_range=fp_range(1, 5000)))
         for n, v, txt in (("v_min", lim.v_min, "lowest command (V)"), ("v_max", lim.v_max, "highest command (V)"),
                           ("v_safe", lim.v_safe, "command held by the watchdog (V)")):
@@ -112,11 +112,11 @@ class ControllerNode(AtomicParametersNode):
             integer_range=int_range(0, RT_PRIORITY_MAX)))
         d("state_decimation", 10, ParameterDescriptor(
             description="publish /controller/state every N samples", integer_range=int_range(1, 100_000)))
-        for alg, (_, spec) in GAINS.items():
-            for name, (default, lo, hi, txt) in spec.items():
-                desc = ParameterDescriptor(description=txt) if lo is None else \
-                    ParameterDescriptor(description=txt, floating_point_range=fp_range(lo, hi))
-                d(f"{alg}.{name}", default, desc)
+        for alg, (_, spec) in GAINS.items():  # from the gains dataclasses' field metadata (hyst_common.params)
+            for name, g in spec.items():
+                desc = ParameterDescriptor(description=g.description) if g.lo is None else \
+                    ParameterDescriptor(description=g.description, floating_point_range=fp_range(g.lo, g.hi))
+                d(f"{alg}.{name}", g.default, desc)
         d("dmrac.initial", "model", ParameterDescriptor(description="initial estimates: model | cs0..cs3 (Table 5.3)"))
         d("stability.policy", "derate", ParameterDescriptor(
             description="gains unstable against model.dynamics (the stage resonance): derate (run the least-derated "
@@ -185,7 +185,7 @@ class ControllerNode(AtomicParametersNode):
             watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
             dmrac_initial=init, model=model,
             reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, stability=stab,
-            effects=effects, effect_values=evals, **gains)
+            effects=effects, effect_values=evals, gain_sets=tuple(gains.items()))
         make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init, s.compensation())  # checks all
         return s
 

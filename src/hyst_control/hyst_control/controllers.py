@@ -1,11 +1,17 @@
-"""The controllers by name: build one, parse a switching schedule, and the controller's view of a wrong model.
+"""The controllers by name (a registry as data), a switching schedule, and the controller's view of a wrong model.
 
-The control laws themselves are :mod:`.dppc`, :mod:`.dmrac` and :mod:`.pid`; the node (``controller_node``), the
-in-process loop (``hyst_bringup.loop``) and ``hyst track`` choose them by the names in :data:`ALGORITHMS`.
+:data:`CONTROLLERS` maps each name to its law class and its gains dataclass. The gains' fields are declared with
+:func:`hyst_common.params.param` (default, range, description), and the controller node declares its
+``<name>.<gain>`` parameters from them, ``hyst track --gain`` names them, and :func:`make_controller` builds the law
+through its ``create`` classmethod (:meth:`hyst_control.base.BaseController.create`). Adding a controller is its
+module (the law with ``create``, its gains dataclass) plus one line in :data:`CONTROLLERS`.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from hyst_common.limits import CommandLimits
+from hyst_common.params import Spec, table
 from hyst_common.profiles import PEA_LIMITS
 from hyst_model.core import MBWParams
 
@@ -16,30 +22,72 @@ from .dppc import DPPC, DPPCGains
 from .errors import ConfigError, ControlError
 from .pid import PID, OpenLoop, PIDGains
 
-__all__ = ["ALGORITHMS", "make_controller", "parse_schedule", "mismatched"]
+__all__ = ["Law", "CONTROLLERS", "ALGORITHMS", "gain_table", "make_controller", "parse_schedule", "mismatched"]
 
-ALGORITHMS = ("dppc", "dmrac", "pid", "open_loop")
+
+@dataclass(frozen=True)
+class Law:
+    """One registered controller.
+
+    Attributes
+    ----------
+    cls : type
+        The law, a :class:`~hyst_control.base.BaseController` with a ``create`` classmethod.
+    gains : type or None
+        Its frozen gains dataclass, every field a :func:`hyst_common.params.param`; None: no gains.
+    """
+
+    cls: type
+    gains: type | None = None
+
+
+#: The controllers by name, in the order they are listed (node parameters, ``--help``, ``hyst track``).
+CONTROLLERS: dict[str, Law] = {
+    "dppc": Law(DPPC, DPPCGains),
+    "dmrac": Law(DMRAC, DMRACGains),
+    "pid": Law(PID, PIDGains),
+    "open_loop": Law(OpenLoop),
+}
+#: Names of the controllers.
+ALGORITHMS = tuple(CONTROLLERS)
+
+
+def gain_table() -> dict[str, tuple[type, dict[str, Spec]]]:
+    """``{name: (gains dataclass, {gain: Spec})}`` of every controller with gains: what the node declares."""
+    return {name: (law.gains, table(law.gains)) for name, law in CONTROLLERS.items() if law.gains is not None}
 
 
 def make_controller(algorithm: str, model: MBWParams, dt: float, limits: CommandLimits | None = None,
-                    gains=None, initial="model", compensation: Compensation | None = None):
-    """Build a controller by name (``dppc``, ``dmrac``, ``pid``, ``open_loop``).
+                    gains=None, initial="model", compensation: Compensation | None = None) -> BaseController:
+    """Build a controller by name (:data:`ALGORITHMS`).
 
-    With a :class:`~hyst_control.compensation.Compensation` that uses any effect, the law is wrapped in
-    :class:`~hyst_control.compensation.Compensated` (the identified effects inverted around it).
+    Parameters
+    ----------
+    algorithm : str
+        A key of :data:`CONTROLLERS`.
+    model : MBWParams
+        The stage model (unused by the PID).
+    dt : float
+        Sample period (s).
+    limits : CommandLimits, optional
+        Command range and slew; the PEA profile's by default.
+    gains : optional
+        The law's gains dataclass; its defaults when None.
+    initial : str or tuple
+        DMRAC's initial estimates (``model``, ``cs0``-``cs3``, or six values).
+    compensation : Compensation, optional
+        With any effect used, the law is wrapped in :class:`~hyst_control.compensation.Compensated` (the
+        identified effects inverted around it).
+
+    Raises
+    ------
+    ConfigError
+        Unknown name (the message lists the known ones) or a setting the law refuses.
     """
-    limits = limits or PEA_LIMITS
-    if algorithm == "dppc":
-        c: BaseController = DPPC(model, dt, gains or DPPCGains(), limits)
-    elif algorithm == "dmrac":
-        c = DMRAC(model, dt, gains or DMRACGains(), initial, limits)
-    elif algorithm == "pid":
-        c = PID(dt, gains or PIDGains(), limits)
-    elif algorithm == "open_loop":
-        c = OpenLoop(model, dt, limits)
-    else:
+    law = CONTROLLERS.get(algorithm)
+    if law is None:
         raise ConfigError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(ALGORITHMS)}")
-    return wrap(c, compensation)
+    return wrap(law.cls.create(model, dt, limits or PEA_LIMITS, gains, initial), compensation)
 
 
 def parse_schedule(text: str) -> list[tuple[str, float]]:

@@ -107,7 +107,7 @@ def _lockstep(node, ex, pub, got, plant, n: int, on_sample=None) -> np.ndarray:
 def test_node_derates_on_the_identified_resonance_and_stays_stable(harness, algorithm):
     node, ex, pub, got = harness("-p", f"algorithm:={algorithm}", "-p", "reference:=sine:10", *RES)
     run = node._settings.gains(algorithm)
-    configured = getattr(node._settings, algorithm)
+    configured = node._settings.configured(algorithm)
     assert run != configured and node._settings.stability.warn
     e = _lockstep(node, ex, pub, got, _resonant_plant(), 1600)
     assert e.size == 1600 and np.all(np.isfinite(e))
@@ -123,7 +123,7 @@ def test_node_derates_on_the_identified_resonance_and_stays_stable(harness, algo
 def test_under_policy_warn_the_configured_gains_run_and_the_loop_is_unstable(harness):
     """The counter-test: the same node and stage with the check's advice ignored."""
     node, ex, pub, got = harness("-p", "reference:=sine:10", "-p", "stability.policy:=warn", *RES)
-    assert node._settings.gains("dppc") == node._settings.dppc and node._settings.stability.warn
+    assert node._settings.gains("dppc") == node._settings.configured("dppc") and node._settings.stability.warn
     e = _lockstep(node, ex, pub, got, _resonant_plant(), 1600)
     assert not np.all(np.isfinite(e)) or np.sqrt(np.mean(e[-600:] ** 2)) > 5e-6
 

@@ -30,13 +30,14 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import String
 
+from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+
 from .core.mbw import PARAM_NAMES
 from .errors import HystError
-from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from .identify.methods import METHODS
 
 __all__ = ["IdentConfig", "IdentNode", "main", "fit_bag", "controller_parameters"]
 
-_METHODS = ("fast", "epso", "lsq")
 
 USAGE = (
     'hyst_ident_node: refit the stage model from rosbag2 recordings (given bags or a watched folder), write the\n'
@@ -74,8 +75,8 @@ class IdentConfig:
         from .io.regular import GAP_POLICIES
         if self.gaps not in GAP_POLICIES:
             raise ValueError(f"gaps must be one of {', '.join(GAP_POLICIES)}")
-        if self.method not in _METHODS:
-            raise ValueError(f"method must be one of {', '.join(_METHODS)}")
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {', '.join(METHODS)}")
         if self.watch_dir and not Path(self.watch_dir).is_dir():
             raise ValueError(f"watch_dir {self.watch_dir!r} is not a directory")
         if self.params_file and not Path(self.params_file).parent.is_dir():
@@ -182,7 +183,7 @@ class IdentNode(AtomicParametersNode):
         d("topic", "/stage/state", ParameterDescriptor(description="JointState topic with the stage state"))
         d("model", "mbw", ParameterDescriptor(description="base model: mbw | bw | pi"))
         d("effects", S, ParameterDescriptor(description="effects composed onto the base (hyst_model.effects)"))
-        d("method", "fast", ParameterDescriptor(description="identifier: fast | epso | lsq"))
+        d("method", "fast", ParameterDescriptor(description="identifier: " + " | ".join(METHODS)))
         d("seed", -1, ParameterDescriptor(description="random seed for epso (-1 = random)",
                                           integer_range=int_range(-1, 2**31 - 1)))
         d("val_fraction", 0.25, ParameterDescriptor(description="held-out tail of each bag for validation (0 = none)",

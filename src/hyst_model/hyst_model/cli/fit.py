@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError, EffectError, HystError, ParamsError
+from ..identify.methods import METHODS
 
 __all__ = ["register", "run", "add_data_options", "load_checked", "parse_split", "parse_config"]
 
@@ -107,7 +108,7 @@ def register(subparsers) -> None:
     p.add_argument("data", help="rosbag2 directory, .mcap file, or CSV")
     p.add_argument("--model", default="mbw", help="base model: mbw (default), bw, pi")
     p.add_argument("--effects", default="", help="comma-separated effects composed onto the base, e.g. creep,delay")
-    p.add_argument("--method", choices=("fast", "epso", "lsq"), default="fast", help="identifier (default fast)")
+    p.add_argument("--method", choices=tuple(METHODS), default="fast", help="identifier (default fast)")
     p.add_argument("--seed", type=int, default=None, help="random seed (EPSO)")
     p.add_argument("--iterations", type=int, default=None, help="EPSO iterations (default 200)")
     p.add_argument("--train", metavar="T0:T1", help="train on T0 <= t < T1 (s), validate on t >= T1")
