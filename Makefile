@@ -32,6 +32,7 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	@$(VENV)/bin/ruff check --quiet src test bench tools conftest.py && echo "ruff: no findings (ruff.toml)"
+	@$(VENV)/bin/mypy $(foreach p,$(PKGS),-p $(p)) && echo "mypy: no findings (mypy.ini)"
 	@PATH="$(VENV)/bin:$$PATH" fastdds shm clean >/dev/null 2>&1 || true
 	@$(PY) -m pytest $(PYTEST_ARGS)
 

@@ -6,8 +6,8 @@ For each hidden scenario shipped with hyst_sim (none, creep, asymmetry, delay, d
 track sine 1/10/30 Hz, steps and C1–C3 with DPPC, DMRAC, PID and the open-loop inverse (feedforward), each with the
 base model of the diagnosis and with its final (extended) model, whose effects the controllers compensate
 (``hyst_control.compensation``; an identified resonance is not compensated, the gains are checked against it and
-derated as the controller node does, ``hyst_control.stability``). The tracking runs on a fresh stage (other noise seed). RMSE in nm (steps: the 50 ms after
-the step left out, as ``bench_tracking``).
+derated as the controller node does, ``hyst_control.stability``). The tracking runs on a fresh stage (other noise
+seed). RMSE in nm (steps: the 50 ms after the step left out, as ``bench_tracking``).
 
 Usage: ``python bench/bench_robust_tracking.py [--scenarios none,creep] [--seconds 2]``; ``make bench`` runs it.
 """
@@ -134,7 +134,8 @@ def main(argv: list[str] | None = None) -> str:
                 ratio = max(res[s, r, a, "ext"] / res["none", r, a, "ext"] for r in sines)
                 verdict.append(f"{a} ext ≤ {lim:g}× none: {'yes' if ratio <= lim else 'NO'} ({ratio:.2g}×)")
             better = sum(res[s, r, a, "ext"] <= res[s, r, a, "base"] * 1.05 for r in REFS for a in ALGS)
-            lines.append(f"- {s}: " + "; ".join(verdict) + f"; ext no worse than base in {better}/{len(REFS) * len(ALGS)}")
+            lines.append(f"- {s}: " + "; ".join(verdict)
+                         + f"; ext no worse than base in {better}/{len(REFS) * len(ALGS)}")
     lines.append(f"\n({time.perf_counter() - t0:.0f} s, {args.seconds:g} s per run at {RATE:g} Hz, RMSE in nm)")
     return "\n".join(lines)
 

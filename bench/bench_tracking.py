@@ -88,7 +88,8 @@ def main_table() -> tuple[str, dict]:
 
 def mismatch_table() -> str:
     lines = ["", "Controller model off by 20 % (ζ ×1.2, ψ, α ×0.8): RMSE / MAE µm", "",
-             "| reference | DPPC | DPPC ki=0.05 | DMRAC κ=0.01 | DMRAC κ=0.1 | PID | open loop |", "|---|---|---|---|---|---|---|"]
+             "| reference | DPPC | DPPC ki=0.05 | DMRAC κ=0.01 | DMRAC κ=0.1 | PID | open loop |",
+             "|---|---|---|---|---|---|---|"]
     wrong = mismatched(pea_default(), 0.2)
     cols = (("dppc", None), ("dppc", DPPCGains(ki=0.05)), ("dmrac", DMRACGains.single(0.01)),
             ("dmrac", DMRACGains.single(0.1)), ("pid", None), ("open_loop", None))

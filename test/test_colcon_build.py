@@ -73,7 +73,8 @@ def test_colcon_build_and_ros2_run_equivalent(tmp_path):
             lines.append(f"p=$(python -c 'from ament_index_python import get_package_prefix; "
                          f"print(get_package_prefix(\"{pkg}\"))')/lib/{pkg}/{exe}; "
                          f"timeout 60 \"$p\" --help >/dev/null 2>\"$p.err\"; echo \"RC $?\"; head -c 600 \"$p.err\"")
-    lines.append("python -c 'import hyst_common as c, hyst_model, hyst_sim, hyst_control, hyst_driver as d, hyst_bringup; "
+    lines.append("python -c 'import hyst_common as c, hyst_model, hyst_sim, hyst_control, hyst_driver as d, "
+                 "hyst_bringup; "
                  "print(\"FROM\", c.__file__, hyst_model.__file__, d.__file__)'")
     script = f"source {shlex.quote(str(setup_bash))}\n" + "\n".join(lines)
     run = subprocess.run(["bash", "-c", script], env=env, capture_output=True, text=True, timeout=900,

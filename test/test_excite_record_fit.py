@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 pytest.importorskip("rclpy")
-from hyst_control.excitation import ExcitationSpec, build_excitation  # noqa: E402
-from hyst_model.io.bag import read_state_bag  # noqa: E402
-from hyst_sim.bagio import read_raw  # noqa: E402
+from hyst_control.excitation import ExcitationSpec, build_excitation
+from hyst_model.io.bag import read_state_bag
+from hyst_sim.bagio import read_raw
 
 pytestmark = [pytest.mark.slow, pytest.mark.ros]
 

@@ -15,7 +15,8 @@ setup(
     zip_safe=True,
     maintainer='hyst developers',
     maintainer_email='hyst@example.org',
-    description='The top of hyst: the device emulator on the simulated plant, the in-process closed loop (hyst track), the single-process 2 kHz loop node and hyst demo.',
+    description=('The top of hyst: the device emulator on the simulated plant, the in-process closed loop (hyst '
+                 'track), the single-process 2 kHz loop node and hyst demo.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

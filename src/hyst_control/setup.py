@@ -15,7 +15,8 @@ setup(
     zip_safe=True,
     maintainer='hyst developers',
     maintainer_email='hyst@example.org',
-    description='DPPC, DMRAC and PID controllers for hysteretic actuators, a controller node that switches algorithm while running, and a reference generator.',
+    description=('DPPC, DMRAC and PID controllers for hysteretic actuators, a controller node that switches algorithm '
+                 'while running, and a reference generator.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

@@ -62,7 +62,7 @@ def main(args=None) -> int:
         return 2
 
     rclpy.init(args=args)
-    nodes = []
+    nodes: list = []
     ctl = None
     t_start = None
     try:

@@ -34,7 +34,7 @@ def find_executable(name: str, pkg: str) -> str:
     if here.exists():
         return str(here)
     try:
-        from ament_index_python.packages import get_package_prefix  # noqa: PLC0415
+        from ament_index_python.packages import get_package_prefix
         cand = Path(get_package_prefix(pkg)) / "lib" / pkg / name
         if cand.exists():
             return str(cand)
@@ -98,8 +98,8 @@ def run(args: argparse.Namespace) -> int:
     rec = subprocess.Popen([find_executable("hyst_bag_record", "hyst_sim"), "-o", str(bag)], env=env,
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     loop = subprocess.Popen([find_executable("hyst_loop_node", "hyst_bringup"), "--schedule", args.schedule,
-                             "--summary-json", "--wait-subscribers", "2", *ros], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                             "--summary-json", "--wait-subscribers", "2", *ros], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     print(f"hyst demo: {', '.join(f'{a} {d:g} s' for a, d in schedule)} at {args.rate:g} Hz on a "
           f"{args.frequency:g} Hz sine; recording {bag}", flush=True)
     try:

@@ -18,6 +18,6 @@ from .blas import single_thread_blas
 # Before anything loads numpy (and with it BLAS): hyst's own processes use one BLAS thread (see .blas).
 single_thread_blas()
 
-from .errors import HystError  # noqa: E402
+from .errors import HystError  # noqa: E402 - after single_thread_blas(), which must run before numpy loads
 
 __all__ = ["HystError", "single_thread_blas"]

@@ -289,5 +289,5 @@ def hand_over(new: BaseController, old: BaseController | None, y: float, r: floa
     else:
         u0, r0, du = new.limits.v_safe, r, 0.0
     new.reset(y, u0, r0)
-    new._du = du  # noqa: SLF001 - the command's rate in force, for laws that fade a start-up bump (OpenLoop)
+    new._du = du  # the command's rate in force, for laws that fade a start-up bump (OpenLoop)
     return new

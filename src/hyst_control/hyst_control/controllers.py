@@ -37,7 +37,7 @@ class Law:
         Its frozen gains dataclass, every field a :func:`hyst_common.params.param`; None: no gains.
     """
 
-    cls: type
+    cls: type[BaseController]
     gains: type | None = None
 
 
@@ -58,7 +58,7 @@ def gain_table() -> dict[str, tuple[type, dict[str, Spec]]]:
 
 
 def make_controller(algorithm: str, model: MBWParams, dt: float, limits: CommandLimits | None = None,
-                    gains=None, initial="model", compensation: Compensation | None = None) -> BaseController:
+                    gains=None, initial="model", compensation: Compensation | None = None):
     """Build a controller by name (:data:`ALGORITHMS`).
 
     Parameters

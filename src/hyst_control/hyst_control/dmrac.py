@@ -15,9 +15,9 @@ Per sample (model units, ν_k = u_k − δ2·u_{k−1}):
   (5.16b)/(5.17b) by clipping α̂ alone; that is not a projection and can *increase* the Lyapunov function (5.19)
   (the property test in test_dmrac.py found θ̂ = (1, 0, 1, 0, 0, 0), ν = y = 1 as a counterexample). hyst
   projects (ψ̂_i, α̂_i) orthogonally onto the same convex set {α ≤ −|ψ| − ϱ}, so (5.20) holds as stated, and
-  iterates on the projected estimates (not on the primed values). Also beyond the thesis every estimate is also kept in a box |θ| ≤ ``theta_max`` (ψ̂ is
-  unprojected in (5.14)–(5.15) and drifts under noise, the classic parameter-drift problem), and an optional
-  dead zone stops adaptation on estimation errors below the noise.
+  iterates on the projected estimates (not on the primed values). Also beyond the thesis every estimate is also kept
+  in a box |θ| ≤ ``theta_max`` (ψ̂ is unprojected in (5.14)–(5.15) and drifts under noise, the classic parameter-drift
+  problem), and an optional dead zone stops adaptation on estimation errors below the noise.
 * Control (5.24)–(5.27): y_{r,k} = r_k − (δ1 − a_m)·y_{k−1}; ν_k = y_{r,k}/μ̂⁺ (y_{r,k} ≥ 0) or y_{r,k}/μ̂⁻; then
   u_k = δ2·u_{k−1} + ν_k (5.23).
 

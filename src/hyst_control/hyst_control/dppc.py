@@ -167,8 +167,8 @@ class DPPC(ModelBased):
             zmax = g.lambda0 / ys  # the integral never asks for more than the initial funnel
             self._z = min(max(self._z + g.ki * e_m, -zmax), zmax)
         nu, lam, eps, lam_prev, reset = dppc_nu(
-            self._p, y_m, e_m, r_m - self._z, r_u, self._u_prev / self._us, g.exact_rate, self._lam, g.lambda_inf / ys, g.omega, g.chi,
-            g.h_lower, g.h_upper, g.funnel_margin, g.zeta0)
+            self._p, y_m, e_m, r_m - self._z, r_u, self._u_prev / self._us, g.exact_rate, self._lam, g.lambda_inf / ys,
+            g.omega, g.chi, g.h_lower, g.h_upper, g.funnel_margin, g.zeta0)
         if reset:
             self._resets += 1
         self._lam, self._eps, self._nu = lam, eps, nu

@@ -40,7 +40,8 @@ def test_pid_anti_windup_limits_overshoot_after_saturation():
 
     good = run(5e-4)
     windup = run(1e3)  # effectively no back-calculation
-    t_settle = lambda ys: np.argmax(np.abs(ys - 15e-6) < 0.1e-6)  # noqa: E731
+    def t_settle(ys):
+        return np.argmax(np.abs(ys - 15e-6) < 0.1e-6)
     assert t_settle(good) < 100  # 50 ms
     assert t_settle(windup) > 2 * t_settle(good)
 

@@ -204,7 +204,7 @@ class DriverNode(AtomicParametersNode):
                 readings = link.service()
                 if readings:
                     self._publish_states(readings, clock)
-            except Exception as err:  # a bug must not silently end the I/O (the watchdog ramp lives here)
+            except Exception as err:  # noqa: BLE001 - a bug must not silently end the I/O (the watchdog ramp lives here)
                 self.io_errors += 1
                 if self.io_errors == 1 or self.io_errors % 1000 == 0:
                     self.get_logger().error(f"I/O loop error #{self.io_errors}: {type(err).__name__}: {err}")

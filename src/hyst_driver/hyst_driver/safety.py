@@ -332,7 +332,8 @@ class VoltageLimiter:
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             dt = 0.0
         step = lim.slew_max * min(dt, lim.dt_max)  # the hard limit: what the amplifier sees per sample
-        if self._safe and math.isfinite(lim.safe_ramp_rate):  # the gentler ramp follows real time (a late write catches up), never above the hard limit
+        # the gentler ramp follows real time (a late write catches up), never above the hard limit
+        if self._safe and math.isfinite(lim.safe_ramp_rate):
             step = min(step, lim.safe_ramp_rate * min(dt, self.RAMP_DT_MAX))
         max_dk = math.floor(step / lim.quantum)
         # The one range-and-slew core (hyst_common.limits) on grid indices: target and output are always in the

@@ -43,7 +43,8 @@ USAGE = (
     'hyst_ident_node: refit the stage model from rosbag2 recordings (given bags or a watched folder), write the\n'
     'ROS 2 params file and optionally push model.* to a running controller node.\n'
     '\n'
-    'usage: hyst_ident_node [--ros-args -p bags:=[...] -p watch_dir:=DIR -p params_file:=P -p controller_node:=/hyst_controller ...]\n'
+    'usage: hyst_ident_node [--ros-args -p bags:=[...] -p watch_dir:=DIR -p params_file:=P '
+    '-p controller_node:=/hyst_controller ...]\n'
     'Parameters are documented in the module docstring and README.'
 )
 
@@ -134,7 +135,8 @@ def controller_parameters(model, theta, dt: float) -> list[Parameter]:
         if not type(e).__module__.startswith("hyst_model.effects."):
             continue  # a user effect: the controller does not declare its keys, it names the effect as unused
         for p in e.params():
-            out.append(Parameter(f"model.{e.name}.{p.name}", Parameter.Type.DOUBLE, float(values[f"{e.name}.{p.name}"])))
+            out.append(Parameter(f"model.{e.name}.{p.name}", Parameter.Type.DOUBLE,
+                                 float(values[f"{e.name}.{p.name}"])))
         for k, v in e.config().items():
             kind = Parameter.Type.STRING if isinstance(v, str) else Parameter.Type.DOUBLE
             out.append(Parameter(f"model.{e.name}.{k}", kind, v if isinstance(v, str) else float(v)))
@@ -272,7 +274,7 @@ class IdentNode(AtomicParametersNode):
                 self.get_logger().error(f"{bag}: {err}")
                 self._publish({"bag": bag, "error": str(err)})
                 return
-            except Exception as err:  # a broken bag or model must not take the node down
+            except Exception as err:  # noqa: BLE001 - a broken bag or model must not take the node down
                 self.get_logger().error(f"{bag}: fit failed ({type(err).__name__}: {err})")
                 self._publish({"bag": bag, "error": f"{type(err).__name__}: {err}"})
                 return
@@ -341,7 +343,7 @@ class IdentNode(AtomicParametersNode):
                 self.get_logger().info(f"pushed model to {node_name}" if ok else
                                        f"{node_name} rejected the model: {r.reason}")
                 self._publish({"bag": summary["bag"], "push": "accepted" if ok else f"rejected: {r.reason}"})
-            except Exception as err:  # service went away mid-call
+            except Exception as err:  # noqa: BLE001 - service went away mid-call
                 self.get_logger().error(f"push to {node_name} failed: {err}")
         fut.add_done_callback(done)
 

@@ -18,7 +18,8 @@ emulator and the diagnosis tests all build on this API::
 Signal chain per sample ``k`` (see :mod:`hyst_sim.truth_effects` for each effect)::
 
     u_cmd ─ clip to [v_min, v_max] and slew_max·dt (NaN/inf hold the last value) ─▶ u_applied
-    u_applied ─ delay ─▶ MBW(u/u_scale) held within the end stops · y_scale + offset ─ asymmetry ─ creep ─ saturation ─ dynamics ─▶ x
+    u_applied ─ delay ─▶ MBW(u/u_scale) held within the end stops · y_scale + offset
+              ─ asymmetry ─ creep ─ saturation ─ dynamics ─▶ x
     x ─ + drift ─ + noise ─ quantisation ─▶ y (what the sensor reports)
 
 With every effect off, ``y`` equals :meth:`hyst_model.core.MBWParams.simulate` of the applied voltage exactly

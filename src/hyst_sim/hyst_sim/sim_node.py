@@ -20,8 +20,8 @@ Modes
 ``lockstep`` (deterministic tests)
     Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has
     ``wait_for_subscribers`` subscribers (default 1; 2 with a recorder: ``hyst_bag_record`` started first then
-    never misses the start) and ``/stage/command`` a publisher, and re-published with the *same* stamp every 0.5 s until it
-    is answered. Each command whose ``header.stamp`` equals the latest state's stamp takes exactly one sample
+    never misses the start) and ``/stage/command`` a publisher, and re-published with the *same* stamp every 0.5 s
+    until it is answered. Each command whose ``header.stamp`` equals the latest state's stamp takes exactly one sample
     and publishes state ``k+1`` stamped ``(k+1)/rate`` s; commands with any other stamp (duplicates, answers to
     a repeated state) are dropped and counted as stale. Same parameters and seed → same data, bit for bit.
     A reliable subscriber slower than the loop (a recorder on a busy machine) slows the run instead of losing
@@ -29,9 +29,9 @@ Modes
 
 Health on ``/diagnostics`` (every second): ``hyst_sim: stage`` — the stage on its end stop (an input the model
 cannot follow, a diverging model) is an ERROR, never a number; clipping, timeouts, missed periods a WARN.
-``hyst_sim: timing`` — missed realtime periods with their share of the second (a WARN, an ERROR above 10 %). Parameter sets are all or nothing: :meth:`SimNode.set_parameters`
-and the node's ``set_parameters`` service (rclpy's sets each parameter alone) validate the whole resulting
-configuration and apply every parameter or none.
+``hyst_sim: timing`` — missed realtime periods with their share of the second (a WARN, an ERROR above 10 %). Parameter
+sets are all or nothing: :meth:`SimNode.set_parameters` and the node's ``set_parameters`` service (rclpy's sets each
+parameter alone) validate the whole resulting configuration and apply every parameter or none.
 """
 from __future__ import annotations
 
@@ -117,7 +117,8 @@ class SimNode(AtomicParametersNode):
         self.create_timer(_DIAG_PERIOD, self._publish_diagnostics)
         self.get_logger().info(
             f"simulated stage: profile {self._settings.profile}, {self._settings.rate:g} Hz, mode "
-            f"{self._settings.mode}, model {'from ' + self._settings.params_file if self._settings.params_file else 'embedded default'}"
+            f"{self._settings.mode}, model "
+            f"{'from ' + self._settings.params_file if self._settings.params_file else 'embedded default'}"
             f"{', scenario loaded' if self._settings.scenario_file else ''}, scheduling {self.scheduling}")
 
     # Parameters ---------------------------------------------------------------------------------------------
@@ -300,7 +301,7 @@ class SimNode(AtomicParametersNode):
                 self._hold(missed)
             try:
                 self._tick()
-            except Exception as err:  # never let the sampler die silently  # noqa: BLE001
+            except Exception as err:  # noqa: BLE001 - never let the sampler die silently
                 if not self.context.ok():  # shutting down (SIGINT/SIGTERM): stop quietly
                     return
                 self.get_logger().error(f"sampling failed: {err}", throttle_duration_sec=1.0)

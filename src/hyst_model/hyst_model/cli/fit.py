@@ -12,11 +12,15 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import DataError, EffectError, HystError, ParamsError
 from ..identify.methods import METHODS
+
+if TYPE_CHECKING:
+    from ..io.record import Record
 
 __all__ = ["register", "run", "add_data_options", "load_checked", "parse_split", "parse_config"]
 
@@ -73,7 +77,7 @@ def parse_split(train: str | None, val_fraction: float, how: str = "tail"):
     return val_fraction
 
 
-def load_checked(args) -> "Record":  # noqa: F821
+def load_checked(args) -> Record:
     """Read DATA per the data options and check it; returns a regular, finite record in SI units."""
     from ..io import load_record
     from ..io.record import Record

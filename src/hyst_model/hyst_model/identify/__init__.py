@@ -17,8 +17,8 @@ from .result import FitResult, Split, block_mask, make_split, rmse
 if TYPE_CHECKING:
     from ..model import Model
 
-__all__ = ["fit", "METHODS", "FastFit", "LSQFit", "EPSOFit", "Estimator", "FitResult", "Split", "make_split", "block_mask",
-           "rmse", "model_label"]
+__all__ = ["fit", "METHODS", "FastFit", "LSQFit", "EPSOFit", "Estimator", "FitResult", "Split", "make_split",
+           "block_mask", "rmse", "model_label"]
 
 
 #: Names imported on first use (numba, scipy; EPSO pulls in the progress display), so that ``hyst --help`` and

@@ -43,7 +43,8 @@ def plausibility(t: np.ndarray, u: np.ndarray, y: np.ndarray, input_unit: str = 
         if d.size:
             fs = 1.0 / float(np.median(d))
             if not RATE_RANGE[0] <= fs <= RATE_RANGE[1]:
-                out.append(f"the sample rate is {fs:.4g} Hz, outside {RATE_RANGE[0]:g} Hz – {RATE_RANGE[1] / 1e3:g} kHz: "
+                out.append(f"the sample rate is {fs:.4g} Hz, outside {RATE_RANGE[0]:g} Hz – "
+                           f"{RATE_RANGE[1] / 1e3:g} kHz: "
                            "are the times in ms or µs read as seconds? give the unit, e.g. --units ms,V,um")
     span = float(np.ptp(y)) if y.size else 0.0
     if span > STROKE_FACTOR * STROKE_MAX:
