@@ -23,7 +23,6 @@ from rclpy.parameter_client import AsyncParameterClient
 from sensor_msgs.msg import JointState
 
 from hyst_bringup.loop import SimPlant, run_closed_loop
-
 from hyst_control.controllers import make_controller
 from hyst_control.reference import parse_reference
 from hyst_model.core import pea_default
