@@ -5,7 +5,7 @@ SHELL := /bin/bash
 VENV     ?= .venv
 PY       := $(VENV)/bin/python
 STAMP    := $(VENV)/.hyst-setup
-PKGS     := hyst_common hyst_model hyst_control hyst_driver hyst_sim
+PKGS     := hyst_common hyst_model hyst_control hyst_driver hyst_sim hyst_bringup
 PKG_META := $(foreach p,$(PKGS),src/$(p)/setup.py src/$(p)/package.xml)
 # Tests and demos stay on this machine and off other people's ROS graphs.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
@@ -18,7 +18,7 @@ help:
 	@echo "make test   - set up if needed, run every test (unit, node, multi-process)"
 	@echo "make test-stress - make test 3 times in a row beside 2 CPU-bound processes; pass/fail per run"
 	@echo "make bench  - run the benchmarks under bench/ and print their tables"
-	@echo "make setup  - create .venv (Python 3.12) with pinned dependencies and the five packages (editable)"
+	@echo "make setup  - create .venv (Python 3.12) with pinned dependencies and the six packages (editable)"
 	@echo "make colcon - colcon build the workspace into build/ and install/ (what a rig with ROS 2 Jazzy does)"
 
 setup: $(STAMP)
@@ -32,6 +32,7 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	@$(VENV)/bin/ruff check --quiet src test bench tools conftest.py && echo "ruff: no findings (ruff.toml)"
+	@$(VENV)/bin/mypy $(foreach p,$(PKGS),-p $(p)) && echo "mypy: no findings (mypy.ini)"
 	@PATH="$(VENV)/bin:$$PATH" fastdds shm clean >/dev/null 2>&1 || true
 	@$(PY) -m pytest $(PYTEST_ARGS)
 

@@ -24,7 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hyst_control.loop import ALGORITHMS, default_plant, make_controller, run_closed_loop
+from hyst_bringup.loop import default_plant, run_closed_loop
+
+from hyst_control.controllers import ALGORITHMS, make_controller
 from hyst_model.core import pea_default
 
 BIN = Path(sys.executable).parent
@@ -95,7 +97,8 @@ def _analyse(path: str, rate: float) -> dict:
     gaps = np.diff(st) * 1e-9 * rate
     rt = np.array([C[k] - S[k] for k in S if k in C]) * 1e3
     span = (st[-1] - st[0]) * 1e-9  # the sim stamps its ticks: the span is the stage's own time base
-    return {"rate": (len(st) - 1) / span if span > 0 else float("nan"), "p50": float(np.percentile(rt, 50)) if rt.size else float("nan"),
+    return {"rate": (len(st) - 1) / span if span > 0 else float("nan"),
+            "p50": float(np.percentile(rt, 50)) if rt.size else float("nan"),
             "p99": float(np.percentile(rt, 99)) if rt.size else float("nan"),
             "missed": float(np.sum(gaps[gaps > 1.5] - 1.0)), "unanswered": int(sum(k not in C for k in S)),
             "up": float(d.get("up", 0.0))}

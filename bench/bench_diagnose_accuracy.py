@@ -22,9 +22,9 @@ from collections import Counter, defaultdict
 for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
-import numpy as np  # noqa: E402
+import numpy as np  # noqa: E402 - after the BLAS thread variables above, which numpy reads at import
 
-from hyst_model.diagnose.unexplained import UNEXPLAINED_FACTOR  # noqa: E402
+from hyst_model.diagnose.unexplained import UNEXPLAINED_FACTOR  # noqa: E402 - as numpy
 
 
 def _rmse(e) -> float:
@@ -59,12 +59,12 @@ def run_case(args: tuple[int, str | None]) -> dict:
     lib = [e for e in c.expected if e not in ("none", "unexplained", "pi_truth")]
     if lib:
         try:
-            from hyst_model.diagnose.diagnose import _scales  # noqa: PLC2701 - same config as diagnose
+            from hyst_model.diagnose.diagnose import _scales  # same config as diagnose
             cfg = dict(_scales(c.u, c.y), dt=float(c.t[1] - c.t[0]))
             cfg["drift.span"] = float(c.t[~validation_mask(c.t.size)][-1] - c.t[0])
             m, th, _ = refit(bm, lib, cfg, c.t, c.u, c.y, bth)
             out["fresh_true"] = _rmse((c.y_fresh - m.simulate(th, c.t_fresh, c.u_fresh))[warm:])
-        except Exception as err:  # noqa: BLE001
+        except Exception as err:  # noqa: BLE001 - a case that cannot be refit is reported, not fatal
             out["fresh_true_error"] = str(err)
     out["seconds"] = time.perf_counter() - t0
     return out
@@ -101,11 +101,13 @@ def summarise(res: list[dict]) -> str:
             ok = r["named"][0] == "unexplained" or r.get("unexplained") is not None
         else:  # PI truth: right answer depends on whether the base error is large
             big = r.get("base_over_noise", 0) >= UNEXPLAINED_FACTOR
-            ok = (r["named"][0] == "unexplained" or r.get("unexplained") is not None) if big else r["named"][0] == "none"
+            ok = ((r["named"][0] == "unexplained" or r.get("unexplained") is not None) if big
+                  else r["named"][0] == "none")
         stats[b][0] += ok
         stats[b][1] += 1
     targets = {"single ≥5×": "≥ 90 %", "single 3–5×": "≥ 70 %", "pair": "both in top 2 ≥ 80 %",
-               "none": "false alarms ≤ 5 %", "outside": "never a bare none", "pi_truth": f"unexplained iff ≥{UNEXPLAINED_FACTOR:g}× noise"}
+               "none": "false alarms ≤ 5 %", "outside": "never a bare none",
+               "pi_truth": f"unexplained iff ≥{UNEXPLAINED_FACTOR:g}× noise"}
     lines.append(f"{'band':<14}{'right':>8}{'cases':>7}{'rate':>8}   target")
     targets["single <3×"] = "(below the issue's range: the form could not reach its size here)"
     for b in ("single ≥5×", "single 3–5×", "single <3×", "pair", "none", "outside", "pi_truth"):

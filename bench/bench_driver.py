@@ -11,10 +11,11 @@ import statistics
 import time
 import timeit
 
+from hyst_bringup.emulator import build_device
 from hyst_driver import protocol_ascii as hdb
 from hyst_driver import protocol_gcs as gcs
 from hyst_driver.adapter import AsciiAdapter, GcsAdapter
-from hyst_driver.emulator import PtyEmulator, build_device
+from hyst_driver.emulator import PtyEmulator
 from hyst_driver.safety import Limits, VoltageLimiter
 from hyst_driver.transport import SerialTransport
 

@@ -4,8 +4,9 @@ Record: 20,000 samples at 2 kHz of the embedded PEA stage model (thesis Table 4.
 driven by a three-tone input, plus 3 nm RMS sensor noise and 2 nm quantisation. Every method fits the same MBW
 model (data-chosen scaling) on the first 75 % and is scored on the last 25 % (free run from rest).
 EPSO runs with the thesis's settings (40 particles, η = 4, ρ1 = 1.5, ρ2 = 2.5, inertia 0.9 → 0.2) for
-``EPSO_ITERATIONS`` generations, in the same search box as fast (Table 3.1 would exclude this stage's α1). A second table fits the real piezo record
-(../shared/data/piezo_150V_1Hz) on its first three sine cycles and validates on the rest.
+``EPSO_ITERATIONS`` generations, in the same search box as fast (Table 3.1 would exclude this stage's α1). A second
+table fits the real piezo record (../shared/data/piezo_150V_1Hz) on its first three sine cycles and validates on the
+rest.
 """
 from __future__ import annotations
 
@@ -93,7 +94,7 @@ def _piezo() -> str:
             res = fit(m, rec.t, rec.u, rec.y, split=(3.257, 6.257))
             rows.append(f"| mbw+{'+'.join(effects)} | 5 kHz (as recorded) | 3.257–6.257 s | {res.rmse * 1e6:.3f} | "
                         f"{res.rmse_train * 1e6:.3f} | {time.perf_counter() - t0:.2f} |")
-    except Exception as err:  # effects are optional for this bench
+    except Exception as err:  # noqa: BLE001 - effects are optional for this bench
         rows.append(f"| (effects unavailable: {err}) | | | | | |")
     return "\n".join(rows)
 

@@ -66,11 +66,11 @@ def _draw_effect(name: str, rng: np.random.Generator, profile: str) -> tuple[flo
 
 def draw_case(seed: int) -> StageCase:
     """Case ``seed`` of the family: about 1 in 6 without an effect, 1 in 4 with a pair, the rest one effect."""
-    from hyst_sim.profiles import _default_model  # the profile's default stage model
+    from hyst_model.core import stage_model  # the profile's default stage model
 
     rng = np.random.default_rng(seed)
     profile = "pea" if rng.random() < 0.6 else "gma"
-    p = _default_model(profile)
+    p = stage_model(profile)
     mbw = p.replace(zeta1=p.zeta1 * rng.uniform(0.85, 1.15), zeta2=p.zeta2 * rng.uniform(0.7, 1.3),
                     y_scale=p.y_scale * rng.uniform(0.8, 1.2))
     k = rng.random()
@@ -81,7 +81,7 @@ def draw_case(seed: int) -> StageCase:
 
 def plant_factory(case: StageCase, with_effects: bool = True):
     """``seed -> plant`` for the case (or its effect-free twin)."""
-    from hyst_control.loop import SimPlant
+    from hyst_bringup.loop import SimPlant
     from hyst_sim.plant import Plant, PlantConfig
 
     def make(seed: int):
@@ -98,7 +98,7 @@ def plant_factory(case: StageCase, with_effects: bool = True):
 
 def _limits_and_excitation(profile: str, seed: int):
     from hyst_control.excitation import ExcitationSpec
-    from hyst_control.limits import GMA_LIMITS, PEA_LIMITS
+    from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
 
     lim = PEA_LIMITS if profile == "pea" else GMA_LIMITS
     return lim, ExcitationSpec(v_min=lim.v_min, v_max=lim.v_max, dt=1.0 / RATE, seed=seed)

@@ -6,8 +6,8 @@ For each hidden scenario shipped with hyst_sim (none, creep, asymmetry, delay, d
 track sine 1/10/30 Hz, steps and C1–C3 with DPPC, DMRAC, PID and the open-loop inverse (feedforward), each with the
 base model of the diagnosis and with its final (extended) model, whose effects the controllers compensate
 (``hyst_control.compensation``; an identified resonance is not compensated, the gains are checked against it and
-derated as the controller node does, ``hyst_control.stability``). The tracking runs on a fresh stage (other noise seed). RMSE in nm (steps: the 50 ms after
-the step left out, as ``bench_tracking``).
+derated as the controller node does, ``hyst_control.stability``). The tracking runs on a fresh stage (other noise
+seed). RMSE in nm (steps: the 50 ms after the step left out, as ``bench_tracking``).
 
 Usage: ``python bench/bench_robust_tracking.py [--scenarios none,creep] [--seconds 2]``; ``make bench`` runs it.
 """
@@ -26,7 +26,7 @@ ALGS = ("dppc", "dmrac", "pid", "open_loop")
 
 
 def _plant(scenario: str, seed: int):
-    from hyst_control.loop import SimPlant
+    from hyst_bringup.loop import SimPlant
     from hyst_sim.plant import Plant, PlantConfig
     from hyst_sim.scenario import scenario_dir
 
@@ -60,7 +60,8 @@ def track(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=N
     Reference) on a fresh stage of ``scenario`` (name or ``seed -> plant``); NaN if the loop diverged."""
     from hyst_control.compensation import from_params
     from hyst_control.errors import ControlError
-    from hyst_control.loop import make_controller, mismatched, run_closed_loop
+    from hyst_bringup.loop import run_closed_loop
+    from hyst_control.controllers import make_controller, mismatched
     from hyst_control.reference import parse_reference
 
     model, comp = from_params(spec, 1.0 / RATE)
@@ -133,7 +134,8 @@ def main(argv: list[str] | None = None) -> str:
                 ratio = max(res[s, r, a, "ext"] / res["none", r, a, "ext"] for r in sines)
                 verdict.append(f"{a} ext ≤ {lim:g}× none: {'yes' if ratio <= lim else 'NO'} ({ratio:.2g}×)")
             better = sum(res[s, r, a, "ext"] <= res[s, r, a, "base"] * 1.05 for r in REFS for a in ALGS)
-            lines.append(f"- {s}: " + "; ".join(verdict) + f"; ext no worse than base in {better}/{len(REFS) * len(ALGS)}")
+            lines.append(f"- {s}: " + "; ".join(verdict)
+                         + f"; ext no worse than base in {better}/{len(REFS) * len(ALGS)}")
     lines.append(f"\n({time.perf_counter() - t0:.0f} s, {args.seconds:g} s per run at {RATE:g} Hz, RMSE in nm)")
     return "\n".join(lines)
 

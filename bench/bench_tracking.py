@@ -17,7 +17,8 @@ import numpy as np
 
 from hyst_control.dmrac import TABLE53, DMRAC, DMRACGains
 from hyst_control.dppc import DPPCGains
-from hyst_control.loop import default_plant, make_controller, mismatched, run_closed_loop
+from hyst_bringup.loop import default_plant, run_closed_loop
+from hyst_control.controllers import make_controller, mismatched
 from hyst_control.reference import TABLE_REFERENCES, parse_reference
 from hyst_model.core import pea_default
 
@@ -87,7 +88,8 @@ def main_table() -> tuple[str, dict]:
 
 def mismatch_table() -> str:
     lines = ["", "Controller model off by 20 % (ζ ×1.2, ψ, α ×0.8): RMSE / MAE µm", "",
-             "| reference | DPPC | DPPC ki=0.05 | DMRAC κ=0.01 | DMRAC κ=0.1 | PID | open loop |", "|---|---|---|---|---|---|---|"]
+             "| reference | DPPC | DPPC ki=0.05 | DMRAC κ=0.01 | DMRAC κ=0.1 | PID | open loop |",
+             "|---|---|---|---|---|---|---|"]
     wrong = mismatched(pea_default(), 0.2)
     cols = (("dppc", None), ("dppc", DPPCGains(ki=0.05)), ("dmrac", DMRACGains.single(0.01)),
             ("dmrac", DMRACGains.single(0.1)), ("pid", None), ("open_loop", None))

@@ -31,7 +31,7 @@ def main(argv: list[str]) -> int:
         try:
             spec.loader.exec_module(mod)
             print(mod.main())
-        except Exception as err:  # one broken bench must not hide the others
+        except Exception as err:  # noqa: BLE001 - one broken bench must not hide the others
             failed += 1
             print(f"FAILED: {type(err).__name__}: {err}")
         print(f"\n({time.perf_counter() - t0:.1f} s)", flush=True)

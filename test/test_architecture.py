@@ -10,25 +10,23 @@ from pathlib import Path
 import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
-PACKAGES = ("hyst_common", "hyst_model", "hyst_sim", "hyst_control", "hyst_driver")
-#: Which hyst packages each package may import: arrows point down only.
+PACKAGES = ("hyst_common", "hyst_model", "hyst_sim", "hyst_control", "hyst_driver", "hyst_bringup")
+#: The order of the house: a package may import only packages of a lower level (never sideways or up).
+LEVEL = {"hyst_common": 0, "hyst_model": 1, "hyst_sim": 2, "hyst_control": 2, "hyst_driver": 2, "hyst_bringup": 3}
+#: Which hyst packages each package may import: arrows point down only (and the driver needs no model).
 ALLOWED = {
     "hyst_common": set(),
     "hyst_model": {"hyst_common"},
     "hyst_sim": {"hyst_common", "hyst_model"},
     "hyst_control": {"hyst_common", "hyst_model"},
     "hyst_driver": {"hyst_common"},
+    "hyst_bringup": {"hyst_common", "hyst_model", "hyst_sim", "hyst_control", "hyst_driver"},
 }
-#: Imports that break ALLOWED today, file by file (issue #12: harnesses to a top package, hardware facts to the
-#: bottom). A ratchet: a new violation fails, and so does a listed one that is gone (remove it here).
-KNOWN = {
-    ("hyst_control/cli_track.py", "hyst_sim"), ("hyst_control/composed.py", "hyst_sim"),
-    ("hyst_control/controller_settings.py", "hyst_sim"), ("hyst_control/demo.py", "hyst_sim"),
-    ("hyst_control/loop.py", "hyst_sim"),
-    ("hyst_driver/driver_node.py", "hyst_sim"), ("hyst_driver/emulator.py", "hyst_sim"),
-}
+#: Imports that break ALLOWED, file by file. A ratchet: a new violation fails, and so does a listed one that is
+#: gone (remove it here). Empty since issue #12 (hardware facts to hyst_common, harnesses to hyst_bringup).
+KNOWN: set[tuple[str, str]] = set()
 #: Besides the *_node.py modules, the only modules that may import rclpy.
-RCLPY_OK = {"hyst_common/node.py", "hyst_control/composed.py"}
+RCLPY_OK = {"hyst_common/node.py", "hyst_bringup/composed.py"}
 
 
 def _modules():
@@ -60,6 +58,22 @@ def test_package_dependencies_point_down():
     new, gone = found - KNOWN, KNOWN - found
     assert not new, f"imports against the dependency direction: {sorted(new)}"
     assert not gone, f"fixed, remove from KNOWN: {sorted(gone)}"
+
+
+def test_allowed_follows_the_levels_and_package_xml_declares_exactly_the_allowed_imports():
+    """common < model < sim, control, driver < bringup; each package.xml's hyst exec_depends are allowed ones and
+    cover every hyst package the code imports (so colcon orders the build and a rig installs what is needed)."""
+    assert set(LEVEL) == set(PACKAGES) == set(ALLOWED)
+    for pkg, deps in ALLOWED.items():
+        assert all(LEVEL[d] < LEVEL[pkg] for d in deps), pkg
+    imported: dict[str, set[str]] = {p: set() for p in PACKAGES}
+    for pkg, _, tree in _modules():
+        imported[pkg] |= _imported(tree) & set(PACKAGES) - {pkg}
+    for pkg in PACKAGES:
+        xml = (SRC / pkg / "package.xml").read_text(encoding="utf-8")
+        declared = {d for d in PACKAGES if f"<exec_depend>{d}</exec_depend>" in xml}
+        assert declared <= ALLOWED[pkg], f"{pkg}/package.xml depends upward or sideways: {declared - ALLOWED[pkg]}"
+        assert imported[pkg] <= declared, f"{pkg} imports undeclared packages: {imported[pkg] - declared}"
 
 
 def test_rclpy_only_in_nodes_and_the_runner():

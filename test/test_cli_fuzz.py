@@ -56,7 +56,7 @@ def valid(tmp_path_factory):
     np.savetxt(inp, np.c_[t, u], delimiter=",", header="t,u", comments="")
     params = d / "p.yaml"
     assert main(["fit", str(csv), "--quiet", "--out", str(params)]) == 0
-    from hyst_model.io.bag import write_state_bag  # noqa: PLC0415
+    from hyst_model.io.bag import write_state_bag
     bag = d / "b.mcap"
     write_state_bag(bag, t, u, y, compress=False)
     return {"csv": csv.read_bytes(), "input": inp.read_bytes(), "params": params.read_bytes(),

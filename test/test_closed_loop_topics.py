@@ -18,13 +18,14 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from sensor_msgs.msg import JointState
 
-from hyst_control.loop import SimPlant, make_controller, run_closed_loop  # noqa: E402
-from hyst_control.reference import parse_reference  # noqa: E402
-from hyst_model.core import pea_default  # noqa: E402
+from hyst_bringup.loop import SimPlant, run_closed_loop
+from hyst_control.controllers import make_controller
+from hyst_control.reference import parse_reference
+from hyst_model.core import pea_default
 
 pytestmark = [pytest.mark.slow, pytest.mark.ros]
 RATE = 1000.0

@@ -1,4 +1,4 @@
-"""`colcon build` builds all five packages, and every executable is found the way `ros2 run` finds it.
+"""`colcon build` builds all six packages, and every executable is found the way `ros2 run` finds it.
 
 ros2cli is not on PyPI, so this is the honest equivalent of `ros2 run <pkg> <exe> --help`: source the install
 space's setup.bash, resolve the package prefix with ``ament_index_python.get_package_prefix(pkg)`` and run
@@ -17,14 +17,15 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("hyst_common", "hyst_model", "hyst_sim", "hyst_control", "hyst_driver")
+PACKAGES = ("hyst_common", "hyst_model", "hyst_sim", "hyst_control", "hyst_driver", "hyst_bringup")
 # Executables a lab user is told about in the README; the test also picks up every other console script.
 REQUIRED = {
     "hyst_common": set(),
     "hyst_model": {"hyst", "hyst_ident_node", "hyst_residual_node"},
     "hyst_sim": {"hyst_sim_node", "hyst_bag_record", "hyst_bag_play"},
-    "hyst_control": {"hyst_controller_node", "hyst_reference_node", "hyst_loop_node"},
-    "hyst_driver": {"hyst_driver_node", "hyst_emulator"},
+    "hyst_control": {"hyst_controller_node", "hyst_reference_node"},
+    "hyst_driver": {"hyst_driver_node"},
+    "hyst_bringup": {"hyst_emulator", "hyst_loop_node"},
 }
 
 
@@ -72,7 +73,8 @@ def test_colcon_build_and_ros2_run_equivalent(tmp_path):
             lines.append(f"p=$(python -c 'from ament_index_python import get_package_prefix; "
                          f"print(get_package_prefix(\"{pkg}\"))')/lib/{pkg}/{exe}; "
                          f"timeout 60 \"$p\" --help >/dev/null 2>\"$p.err\"; echo \"RC $?\"; head -c 600 \"$p.err\"")
-    lines.append("python -c 'import hyst_common as c, hyst_model, hyst_sim, hyst_control, hyst_driver as d; "
+    lines.append("python -c 'import hyst_common as c, hyst_model, hyst_sim, hyst_control, hyst_driver as d, "
+                 "hyst_bringup; "
                  "print(\"FROM\", c.__file__, hyst_model.__file__, d.__file__)'")
     script = f"source {shlex.quote(str(setup_bash))}\n" + "\n".join(lines)
     run = subprocess.run(["bash", "-c", script], env=env, capture_output=True, text=True, timeout=900,

@@ -40,8 +40,8 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -202,7 +202,7 @@ def _start_driver_and_emulator(procs: Procs, tmp_path: Path, protocol: str = "as
     link = tmp_path / "tty"
     # --nice/--rt-priority: the emulator stands in for a microcontroller that never shares the host's CPU
     # (ignored, with a message, where not allowed)
-    procs.start("emulator", _script("hyst_driver.emulator", "--link", str(link), "--rate", f"{RATE:g}",
+    procs.start("emulator", _script("hyst_bringup.emulator", "--link", str(link), "--rate", f"{RATE:g}",
                                     "--nice", "-10", *(["--rt-priority", str(RT_DEVICE)] if rt else [])))
     t_end = time.monotonic() + 30
     while not link.exists() and time.monotonic() < t_end:

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 pytest.importorskip("rclpy")
-from hyst_control.excitation import ExcitationSpec, build_excitation  # noqa: E402
-from hyst_model.io.bag import read_state_bag  # noqa: E402
-from hyst_sim.bagio import read_raw  # noqa: E402
+from hyst_control.excitation import ExcitationSpec, build_excitation
+from hyst_model.io.bag import read_state_bag
+from hyst_sim.bagio import read_raw
 
 pytestmark = [pytest.mark.slow, pytest.mark.ros]
 
@@ -25,7 +25,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.ros]
 def test_default_excitation_keeps_the_simulated_stage_off_its_stops_and_fits(profile, rate):
     """Jumped steps drove the per-sample MBW to its lower stop (4 of 9 seeds fitted at 19-300 nm); ramped ones
     do not, and every seed's noiseless-model fit reaches the sensor noise."""
-    from hyst_control.limits import GMA_LIMITS, PEA_LIMITS
+    from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
     from hyst_model.identify import fit
     from hyst_model.models import data_config
     from hyst_model.spec import build_model

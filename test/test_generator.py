@@ -6,7 +6,7 @@ import pytest
 
 from hyst_sim.generator import FORMS, KINDS, case_family, generate_case
 from hyst_sim.generator.forms import LIBRARY_NAME
-from hyst_sim.profiles import GMA, PEA
+from hyst_common.profiles import GMA, PEA
 
 
 def test_same_seed_same_arrays_other_seed_other_arrays():
@@ -45,12 +45,12 @@ def test_family_is_balanced_over_kinds():
 
 
 def test_every_form_changes_the_output_and_scales_with_strength():
-    from hyst_sim.generator.cases import _default_model
+    from hyst_model.core import stage_model
     from hyst_sim.generator.forms import Ctx, draw
     rng = np.random.default_rng(0)
     t = np.arange(8000) / 2000.0
     u = 75 + 60 * np.sin(2 * np.pi * 1.5 * t) * np.clip(t / 0.2, 0, 1)
-    sim = _default_model("pea").simulate
+    sim = stage_model("pea").simulate
     x = sim(u)
     for name, (fn, _) in FORMS.items():
         c = Ctx(t, u, sim, x, 30e-6, draw(name, rng, 4.0))

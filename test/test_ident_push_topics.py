@@ -19,14 +19,14 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import String  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 
-from hyst_control.excitation import ExcitationSpec, build_excitation  # noqa: E402
-from hyst_control.reference import parse_reference  # noqa: E402
-from hyst_model.io.bag import write_state_bag  # noqa: E402
+from hyst_control.excitation import ExcitationSpec, build_excitation
+from hyst_control.reference import parse_reference
+from hyst_model.io.bag import write_state_bag
 
 pytestmark = [pytest.mark.slow, pytest.mark.ros]
 RATE = 1000.0

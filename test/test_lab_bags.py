@@ -20,12 +20,12 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.serialization import deserialize_message  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState
 
-from hyst_sim.bagio import read_raw  # noqa: E402
+from hyst_sim.bagio import read_raw
 
 pytestmark = [pytest.mark.slow, pytest.mark.ros]
 
@@ -44,7 +44,7 @@ class Lab:
         self.root, self.procs = root, {}
 
     def start(self, name: str, exe: str, *args) -> subprocess.Popen:
-        log = open(self.root / f"{name}.log", "w")  # noqa: SIM115 - closed with the process
+        log = open(self.root / f"{name}.log", "w")  # closed with the process
         p = subprocess.Popen([str(BIN / exe), *map(str, args)], env=dict(os.environ), stdout=log,
                              stderr=subprocess.STDOUT, text=True)
         self.procs[name] = (p, log)
@@ -256,7 +256,8 @@ def test_lockstep_waits_for_a_subscriber_slower_than_the_loop(tmp_path):
 
     The reader takes ~2 ms per message, slower than the loop, so its backlog fills its history, and it stalls for
     0.5 s every 1000 messages; a keep-last publisher then drops the samples the stalled reader has not
-    acknowledged within 100 ms (the sim lost samples so); lockstep must wait for the reader instead. The controller's commands, read the same slow way, are complete after the first too.
+    acknowledged within 100 ms (the sim lost samples so); lockstep must wait for the reader instead. The controller's
+    commands, read the same slow way, are complete after the first too.
     """
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 

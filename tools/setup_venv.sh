@@ -45,7 +45,7 @@ pip=("$venv/bin/python" -m pip --disable-pip-version-check -q)
 if [ $ros_sourced = 0 ]; then
     "${pip[@]}" install -r requirements-ros.txt
 fi
-# Editable installs of the four packages (setuptools develop mode keeps console scripts in .venv/bin).
-"${pip[@]}" install --no-deps --no-build-isolation $(printf -- '-e src/%s ' hyst_common hyst_model hyst_sim hyst_control hyst_driver)
+# Editable installs of the six packages (setuptools develop mode keeps console scripts in .venv/bin).
+"${pip[@]}" install --no-deps --no-build-isolation $(printf -- '-e src/%s ' hyst_common hyst_model hyst_sim hyst_control hyst_driver hyst_bringup)
 "$venv/bin/python" -c "import rclpy, numpy, numba, hyst_common, hyst_model" || { echo "error: setup incomplete" >&2; exit 1; }
 echo "hyst environment ready in $venv"

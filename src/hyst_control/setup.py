@@ -15,19 +15,15 @@ setup(
     zip_safe=True,
     maintainer='hyst developers',
     maintainer_email='hyst@example.org',
-    description='DPPC, DMRAC and PID controllers for hysteretic actuators, a controller node that switches algorithm while running, and a reference generator.',
+    description=('DPPC, DMRAC and PID controllers for hysteretic actuators, a controller node that switches algorithm '
+                 'while running, and a reference generator.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'hyst_controller_node = hyst_control.controller_node:main',
             'hyst_reference_node = hyst_control.reference_node:main',
-            'hyst_loop_node = hyst_control.composed:main',
             'hyst_excite_node = hyst_control.excite_node:main',
-        ],
-        'hyst.commands': [
-            'track = hyst_control.cli_track:register',
-            'demo = hyst_control.demo:register',
         ],
     },
 )

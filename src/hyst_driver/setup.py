@@ -15,13 +15,13 @@ setup(
     zip_safe=True,
     maintainer='hyst developers',
     maintainer_email='hyst@example.org',
-    description='Serial driver node for the PEA/GMA amplifier and displacement sensor, protocol adapters and a device emulator.',
+    description=('Serial driver node for the PEA/GMA amplifier and displacement sensor, protocol adapters and a device '
+                 'emulator.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'hyst_driver_node = hyst_driver.driver_node:main',
-            'hyst_emulator = hyst_driver.emulator:main',
         ],
     },
 )

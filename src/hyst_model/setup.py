@@ -16,7 +16,8 @@ setup(
     zip_safe=True,
     maintainer='hyst developers',
     maintainer_email='hyst@example.org',
-    description='Hysteresis models (backlash, Dahl, Bouc-Wen, MBW, Prandtl-Ishlinskii), physical-effect extensions, identification (EPSO, fast fitter), residual diagnostics, bag/CSV IO and the hyst command line.',
+    description=('Hysteresis models (backlash, Dahl, Bouc-Wen, MBW, Prandtl-Ishlinskii), physical-effect extensions, '
+                 'identification (EPSO, fast fitter), residual diagnostics, bag/CSV IO and the hyst command line.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

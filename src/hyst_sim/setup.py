@@ -16,7 +16,8 @@ setup(
     zip_safe=True,
     maintainer='hyst developers',
     maintainer_email='hyst@example.org',
-    description='Simulated actuator stage that stands in for the driver: MBW plant with optional hidden physical effects; bag recorder and player.',
+    description=('Simulated actuator stage that stands in for the driver: MBW plant with optional hidden physical '
+                 'effects; bag recorder and player.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

@@ -82,7 +82,7 @@ class AtomicParametersNode(Node):
 def _executor(kind: str):
     if kind == "events":
         try:
-            from rclpy.experimental import EventsExecutor  # noqa: PLC0415 - optional in older rclpy
+            from rclpy.experimental import EventsExecutor  # optional in older rclpy
             return EventsExecutor()
         except ImportError:  # pragma: no cover - older rclpy
             pass

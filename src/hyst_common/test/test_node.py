@@ -10,12 +10,12 @@ import time
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 
-from hyst_common.node import AtomicParametersNode, fp_range  # noqa: E402
+from hyst_common.node import AtomicParametersNode, fp_range
 
 pytestmark = pytest.mark.ros
 

@@ -24,10 +24,11 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numba import njit
 
+from hyst_common.limits import CommandLimits
+from hyst_common.profiles import PEA_LIMITS
 from hyst_model.core import MBWParams
 
 from .errors import ConfigError
-from .limits import PEA_LIMITS, CommandLimits
 
 __all__ = ["Controller", "BaseController", "ModelBased", "hand_over", "mu_select", "invert_nu", "check_model"]
 
@@ -143,6 +144,15 @@ class BaseController:
     """
 
     name = "base"
+
+    @classmethod
+    def create(cls, model: MBWParams, dt: float, limits: CommandLimits, gains=None, initial="model"):
+        """Build from the uniform arguments of :func:`hyst_control.controllers.make_controller`.
+
+        Each law maps them to its own constructor and ignores what it does not use (``gains`` None = its
+        defaults; ``initial``: DMRAC's initial estimates).
+        """
+        raise NotImplementedError(f"{cls.__name__} cannot be built by name")
 
     def __init__(self, dt: float, limits: CommandLimits | None = None) -> None:
         if not (dt > 0 and math.isfinite(dt)):
@@ -279,5 +289,5 @@ def hand_over(new: BaseController, old: BaseController | None, y: float, r: floa
     else:
         u0, r0, du = new.limits.v_safe, r, 0.0
     new.reset(y, u0, r0)
-    new._du = du  # noqa: SLF001 - the command's rate in force, for laws that fade a start-up bump (OpenLoop)
+    new._du = du  # the command's rate in force, for laws that fade a start-up bump (OpenLoop)
     return new

@@ -125,11 +125,11 @@ def plan_compensation(model: MBWParams, effects: Sequence[str], values: Mapping[
     ConfigError
         Unknown effect, a missing parameter, or an effect whose inverse does not exist at these values.
     """
-    from hyst_model.effects.online import MBWStepper  # noqa: PLC0415 - effects load numba; only when used
-    from hyst_model.errors import HystError  # noqa: PLC0415
-    from hyst_model.spec import build_model  # noqa: PLC0415
+    from hyst_model.effects.online import MBWStepper  # effects load numba; only when used
+    from hyst_model.errors import HystError
+    from hyst_model.spec import build_model
 
-    from hyst_model.effects import EFFECTS  # noqa: PLC0415
+    from hyst_model.effects import EFFECTS
 
     comp = Compensation()
     effects = order = [str(e) for e in effects]
@@ -180,7 +180,7 @@ def effect_parameters(dt: float, u_scale: float, y_scale: float) -> dict[str, tu
     (an effect at its defaults changes nothing), so a node can declare them all and take any params file or push.
     Effects with several configurations (dynamics' structures) contribute the union of their parameters.
     """
-    from hyst_model.effects import EFFECTS  # noqa: PLC0415
+    from hyst_model.effects import EFFECTS
 
     base = {"dt": dt, "u_scale": u_scale, "y_scale": y_scale}
     out: dict[str, tuple[object, str]] = {}
@@ -204,7 +204,7 @@ def from_params(spec, dt: float | None = None) -> tuple[MBWParams, Compensation]
     ConfigError
         Base other than ``mbw``, missing base parameters or scales, or an effect that cannot be planned.
     """
-    from hyst_model.core import PARAM_NAMES  # noqa: PLC0415
+    from hyst_model.core import PARAM_NAMES
 
     if spec.base != "mbw":
         raise ConfigError(f"the controllers invert the MBW model: model.base must be 'mbw', not {spec.base!r}")

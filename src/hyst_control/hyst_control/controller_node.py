@@ -7,8 +7,8 @@ stamp of the state sample it answers), ``/controller/state`` (named scalars: err
 
 The command answering the state stamped t_k acts at the next sample, so the reference is evaluated at
 t_k + 1/rate: the newest reference sample is extrapolated with its rate from its own stamp (at most 50 ms; both
-stamps come from the same clock in realtime operation; at most 5 ms ahead). Parameters: ``algorithm`` (bumpless switch at run time),
-per-algorithm gains ``dppc.*``, ``dmrac.*``, ``pid.*`` (ranges declared, consistency checked in the on-set
+stamps come from the same clock in realtime operation; at most 5 ms ahead). Parameters: ``algorithm`` (bumpless switch
+at run time), per-algorithm gains ``dppc.*``, ``dmrac.*``, ``pid.*`` (ranges declared, consistency checked in the on-set
 callback), limits ``v_min``/``v_max``/``slew_max``/``v_safe``, ``watchdog_periods`` and the stage model
 ``model.*`` (from ``--ros-args --params-file P``; the identification node may push new values at run time).
 Watchdog: no state for ``watchdog_periods``/``rate`` seconds → command ``v_safe`` (slew-limited), log, and
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
@@ -25,16 +26,17 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from hyst_model.core import MBWParams
+from hyst_common.limits import CommandLimits
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
+from hyst_model.core import MBWParams
 
 from .base import check_model, hand_over
 from .compensation import effect_parameters
 from .dmrac import TABLE53
 from .errors import ControlError
-from .limits import GMA_LIMITS, PEA_LIMITS, CommandLimits
-from .loop import ALGORITHMS, make_controller
+from .controllers import ALGORITHMS, make_controller
 from .reference import parse_reference
 from .controller_settings import GAINS, MODEL_KEYS, ControllerSettings, cached_guard, profile_model
 from .stability import POLICIES, StabilityVerdict, identified_resonance
@@ -61,14 +63,15 @@ class ControllerNode(AtomicParametersNode):
         self.scheduling = set_realtime(int(self.get_parameter("rt_priority").value))
         if self.get_parameter("rt_priority").value and self.scheduling.policy != "fifo":
             self.get_logger().warning(f"{self.scheduling.note}; running with normal scheduling")
-        self._ctrl = None
+        self._ctrl: Any = None  # the running law (possibly Compensated); None until the first state
         self._y = math.nan
-        self._ref = None  # (t_stamp, r, rdot)
-        self._last_state_wall = None
+        self._ref: tuple[float, float, float] | None = None  # (t_stamp, r, rdot)
+        self._last_state_wall: float | None = None
         self._tripped = False
-        self._n = dict.fromkeys(("states", "commands", "bad_states", "bad_refs", "watchdog_trips", "switches", "gaps"), 0)
-        self._t_last = None  # stamp of the previous state
-        self._t0 = None  # first state stamp (internal reference time origin)
+        self._n = dict.fromkeys(("states", "commands", "bad_states", "bad_refs", "watchdog_trips", "switches", "gaps"),
+                                0)
+        self._t_last: float | None = None  # stamp of the previous state
+        self._t0: float | None = None  # first state stamp (internal reference time origin)
         self._pending = math.nan  # reference targeted by the last command: compared with the next sample
         self._skip = 0            # samples after a (re)start or switch left out of the tracking statistics
         self._stats: dict[str, list] = {}  # algorithm -> [n, sum e², max |e|]
@@ -93,8 +96,9 @@ class ControllerNode(AtomicParametersNode):
         d("profile", "pea", ParameterDescriptor(description="limit defaults: pea (0-150 V) | gma (+-5 V)",
                                                 read_only=True))
         lim = GMA_LIMITS if self.get_parameter("profile").value == "gma" else PEA_LIMITS
-        d("algorithm", "dppc", ParameterDescriptor(description="dppc | dmrac | pid | open_loop (bumpless switch)"))
-        d("rate", 1000.0, ParameterDescriptor(description="expected state rate (Hz)", floating_point_range=fp_range(1, 5000)))
+        d("algorithm", "dppc", ParameterDescriptor(description=" | ".join(ALGORITHMS) + " (bumpless switch)"))
+        d("rate", 1000.0, ParameterDescriptor(description="expected state rate (Hz)",
+                                              floating_point_range=fp_range(1, 5000)))
         for n, v, txt in (("v_min", lim.v_min, "lowest command (V)"), ("v_max", lim.v_max, "highest command (V)"),
                           ("v_safe", lim.v_safe, "command held by the watchdog (V)")):
             d(n, v, ParameterDescriptor(description=txt, floating_point_range=fp_range(-200, 200)))
@@ -111,11 +115,11 @@ class ControllerNode(AtomicParametersNode):
             integer_range=int_range(0, RT_PRIORITY_MAX)))
         d("state_decimation", 10, ParameterDescriptor(
             description="publish /controller/state every N samples", integer_range=int_range(1, 100_000)))
-        for alg, (_, spec) in GAINS.items():
-            for name, (default, lo, hi, txt) in spec.items():
-                desc = ParameterDescriptor(description=txt) if lo is None else \
-                    ParameterDescriptor(description=txt, floating_point_range=fp_range(lo, hi))
-                d(f"{alg}.{name}", default, desc)
+        for alg, (_, spec) in GAINS.items():  # from the gains dataclasses' field metadata (hyst_common.params)
+            for name, g in spec.items():
+                desc = ParameterDescriptor(description=g.description) if g.lo is None or g.hi is None else \
+                    ParameterDescriptor(description=g.description, floating_point_range=fp_range(g.lo, g.hi))
+                d(f"{alg}.{name}", g.default, desc)
         d("dmrac.initial", "model", ParameterDescriptor(description="initial estimates: model | cs0..cs3 (Table 5.3)"))
         d("stability.policy", "derate", ParameterDescriptor(
             description="gains unstable against model.dynamics (the stage resonance): derate (run the least-derated "
@@ -184,7 +188,7 @@ class ControllerNode(AtomicParametersNode):
             watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
             dmrac_initial=init, model=model,
             reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, stability=stab,
-            effects=effects, effect_values=evals, **gains)
+            effects=effects, effect_values=evals, gain_sets=tuple(gains.items()))
         make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init, s.compensation())  # checks all
         return s
 
@@ -338,7 +342,7 @@ class ControllerNode(AtomicParametersNode):
             self._n["watchdog_trips"] += 1
             self.get_logger().error(f"no /stage/state for {silent:.3f} s: commanding v_safe = {s.limits.v_safe} V")
         u = s.limits.apply(s.limits.v_safe, self._ctrl.last_command, 0.02)
-        getattr(self._ctrl, "inner", self._ctrl)._u_prev = u  # noqa: SLF001 - the watchdog owns the output while tripped
+        getattr(self._ctrl, "inner", self._ctrl)._u_prev = u  # the watchdog owns the output while tripped
         self._publish_command(self.get_clock().now().to_msg(), u)
 
     def _diagnostics(self) -> None:
@@ -402,7 +406,8 @@ class ControllerNode(AtomicParametersNode):
                        if k.startswith("model.") and not self.has_parameter(k))
         parts = []
         if comp.unused:
-            parts.append("the control laws do not compensate " + "; ".join(f"{k} ({v})" for k, v in comp.unused.items()))
+            parts.append("the control laws do not compensate "
+                         + "; ".join(f"{k} ({v})" for k, v in comp.unused.items()))
         if extra:
             parts.append(f"model parameters unknown to this node are not used ({', '.join(extra[:6])}"
                          f"{', ...' if len(extra) > 6 else ''})")

@@ -15,9 +15,9 @@ Per sample (model units, ν_k = u_k − δ2·u_{k−1}):
   (5.16b)/(5.17b) by clipping α̂ alone; that is not a projection and can *increase* the Lyapunov function (5.19)
   (the property test in test_dmrac.py found θ̂ = (1, 0, 1, 0, 0, 0), ν = y = 1 as a counterexample). hyst
   projects (ψ̂_i, α̂_i) orthogonally onto the same convex set {α ≤ −|ψ| − ϱ}, so (5.20) holds as stated, and
-  iterates on the projected estimates (not on the primed values). Also beyond the thesis every estimate is also kept in a box |θ| ≤ ``theta_max`` (ψ̂ is
-  unprojected in (5.14)–(5.15) and drifts under noise, the classic parameter-drift problem), and an optional
-  dead zone stops adaptation on estimation errors below the noise.
+  iterates on the projected estimates (not on the primed values). Also beyond the thesis every estimate is also kept
+  in a box |θ| ≤ ``theta_max`` (ψ̂ is unprojected in (5.14)–(5.15) and drifts under noise, the classic parameter-drift
+  problem), and an optional dead zone stops adaptation on estimation errors below the noise.
 * Control (5.24)–(5.27): y_{r,k} = r_k − (δ1 − a_m)·y_{k−1}; ν_k = y_{r,k}/μ̂⁺ (y_{r,k} ≥ 0) or y_{r,k}/μ̂⁻; then
   u_k = δ2·u_{k−1} + ν_k (5.23).
 
@@ -32,11 +32,12 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from hyst_common.limits import CommandLimits
+from hyst_common.params import param
 from hyst_model.core import MBWParams, mbw_step
 
 from .base import ModelBased, invert_nu
 from .errors import ConfigError
-from .limits import CommandLimits
 
 __all__ = ["DMRACGains", "DMRAC", "TABLE53", "ESTIMATE_NAMES", "dmrac_adapt"]
 
@@ -73,14 +74,14 @@ class DMRACGains:
         Invert μ̂ with the input rate itself (:func:`hyst_control.base.invert_nu`); False = r_{u,k} (5.4).
     """
 
-    kappa1: float = 0.01
-    kappa2: float = 0.01
-    a_m: float = 0.1
-    zeta0: float = 1e-3
-    varrho: float = 1e-4
-    theta_max: float = 10.0
-    deadzone: float = 0.0
-    exact_rate: bool = True
+    kappa1: float = param(0.01, 1e-6, 1.99, "adaptation gain κ1 of ζ1, ψ1, α1 (5.12)-(5.17)")
+    kappa2: float = param(0.01, 0.0, 1.99, "adaptation gain κ2 of ζ2, ψ2, α2")
+    a_m: float = param(0.1, -0.99, 0.99, "reference-model pole a_m (5.3) = closed-loop error pole")
+    zeta0: float = param(1e-3, 1e-9, 1.0, "projection bound ζ0 (5.12b)")
+    varrho: float = param(1e-4, 1e-9, 1.0, "projection margin ϱ (5.16b)")
+    theta_max: float = param(10.0, 0.01, 1e3, "box on every estimate (model units)")
+    deadzone: float = param(0.0, 0.0, 1e-6, "no adaptation below this estimation error (m)")
+    exact_rate: bool = param(True, doc="invert with the input rate (true) or r_u (5.4)")
 
     @classmethod
     def single(cls, kappa: float, **kw) -> "DMRACGains":
@@ -174,6 +175,11 @@ class DMRAC(ModelBased):
     """
 
     name = "dmrac"
+
+    @classmethod
+    def create(cls, model, dt, limits, gains=None, initial="model"):
+        """See :meth:`hyst_control.base.BaseController.create`."""
+        return cls(model, dt, gains or DMRACGains(), initial, limits)
 
     def __init__(self, model: MBWParams, dt: float, gains: DMRACGains = DMRACGains(),
                  initial: str | tuple = "model", limits: CommandLimits | None = None) -> None:

@@ -32,11 +32,12 @@ from dataclasses import dataclass
 
 from numba import njit
 
+from hyst_common.limits import CommandLimits
+from hyst_common.params import param
 from hyst_model.core import MBWParams
 
 from .base import ModelBased, invert_nu
 from .errors import ConfigError
-from .limits import CommandLimits
 
 __all__ = ["DPPCGains", "DPPC", "THESIS_TABLE42", "dppc_nu"]
 
@@ -48,16 +49,16 @@ class DPPCGains:
     The thesis's λ0 = 20, λ∞ = 0.4 are read as µm (its errors are reported in µm on a 30 µm stage).
     """
 
-    lambda0: float = 20e-6
-    lambda_inf: float = 0.4e-6
-    omega: float = 0.01
-    chi: float = 0.1
-    h_lower: float = 1.0
-    h_upper: float = 1.0
-    funnel_margin: float = 0.9
-    ki: float = 0.0
-    zeta0: float = 1e-3
-    exact_rate: bool = True
+    lambda0: float = param(20e-6, 1e-9, 1e-3, "initial funnel half-width λ0 (m), Table 4.2: 20 µm")
+    lambda_inf: float = param(0.4e-6, 1e-10, 1e-4, "final funnel half-width λ∞ (m), Table 4.2: 0.4 µm")
+    omega: float = param(0.01, 1e-6, 0.999, "funnel decay per sample ω (4.7)")
+    chi: float = param(0.1, 1e-3, 0.999, "error contraction χ (4.11); larger = gentler, more robust")
+    h_lower: float = param(1.0, 0.01, 100.0, "lower funnel factor h̲ (4.8)")
+    h_upper: float = param(1.0, 0.01, 100.0, "upper funnel factor h̄ (4.8)")
+    funnel_margin: float = param(0.9, 0.1, 0.99, "out-of-funnel re-initialisation margin ρ")
+    ki: float = param(0.0, 0.0, 0.99, "integral of the error on the target (beyond thesis; 0 = off)")
+    zeta0: float = param(1e-3, 1e-9, 1.0, "lower bound on μ (Assumption 4.1)")
+    exact_rate: bool = param(True, doc="invert with the input rate (true) or the reference rate r_u (4.3)")
 
     def __post_init__(self) -> None:
         if not (self.lambda0 > self.lambda_inf > 0):
@@ -119,6 +120,11 @@ class DPPC(ModelBased):
 
     name = "dppc"
 
+    @classmethod
+    def create(cls, model, dt, limits, gains=None, initial="model"):
+        """See :meth:`hyst_control.base.BaseController.create`."""
+        return cls(model, dt, gains or DPPCGains(), limits)
+
     def __init__(self, model: MBWParams, dt: float, gains: DPPCGains = THESIS_TABLE42,
                  limits: CommandLimits | None = None) -> None:
         super().__init__(model, dt, limits)
@@ -161,8 +167,8 @@ class DPPC(ModelBased):
             zmax = g.lambda0 / ys  # the integral never asks for more than the initial funnel
             self._z = min(max(self._z + g.ki * e_m, -zmax), zmax)
         nu, lam, eps, lam_prev, reset = dppc_nu(
-            self._p, y_m, e_m, r_m - self._z, r_u, self._u_prev / self._us, g.exact_rate, self._lam, g.lambda_inf / ys, g.omega, g.chi,
-            g.h_lower, g.h_upper, g.funnel_margin, g.zeta0)
+            self._p, y_m, e_m, r_m - self._z, r_u, self._u_prev / self._us, g.exact_rate, self._lam, g.lambda_inf / ys,
+            g.omega, g.chi, g.h_lower, g.h_upper, g.funnel_margin, g.zeta0)
         if reset:
             self._resets += 1
         self._lam, self._eps, self._nu = lam, eps, nu

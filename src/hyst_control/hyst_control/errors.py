@@ -18,7 +18,7 @@ class ConfigError(ControlError):
     """A controller gain, limit or model parameter is out of range or inconsistent."""
 
 
-class ReferenceError_(ControlError):  # noqa: N801 - trailing underscore: do not shadow the builtin
+class ReferenceError_(ControlError):  # trailing underscore: do not shadow the builtin
     """A reference specification cannot be parsed or has impossible values."""
 
 

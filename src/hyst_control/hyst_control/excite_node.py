@@ -19,10 +19,10 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from sensor_msgs.msg import JointState
 
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
 
 from .errors import ControlError
 from .excitation import PARTS, ExcitationSpec, build_excitation
-from .limits import GMA_LIMITS, PEA_LIMITS
 
 __all__ = ["ExciteNode", "main"]
 
@@ -59,8 +59,8 @@ class ExciteNode(AtomicParametersNode):
             raise ControlError(f"profile must be pea or gma, got {prof!r}")
         lim = GMA_LIMITS if prof == "gma" else PEA_LIMITS
         s = ExcitationSpec()
-        d("rate", 1000.0, ParameterDescriptor(description="stage sample rate (Hz)", floating_point_range=fp_range(1, 5000),
-                                              **ro))
+        d("rate", 1000.0, ParameterDescriptor(description="stage sample rate (Hz)",
+                                              floating_point_range=fp_range(1, 5000), **ro))
         d("v_min", lim.v_min, ParameterDescriptor(description="lowest command (V), inside the profile",
                                                   floating_point_range=fp_range(lim.v_min, lim.v_max), **ro))
         d("v_max", lim.v_max, ParameterDescriptor(description="highest command (V), inside the profile",
@@ -80,8 +80,8 @@ class ExciteNode(AtomicParametersNode):
                                                                  **ro))
         d("periods", s.periods, ParameterDescriptor(description="periods per sine/triangle amplitude",
                                                     integer_range=int_range(1, 10_000), **ro))
-        d("n_steps", s.n_steps, ParameterDescriptor(description="random step levels", integer_range=int_range(1, 10_000),
-                                                    **ro))
+        d("n_steps", s.n_steps, ParameterDescriptor(description="random step levels",
+                                                    integer_range=int_range(1, 10_000), **ro))
         d("wait_for_subscribers", 1, ParameterDescriptor(
             description="answer no state until /stage/command has this many subscribers (stage + recorder = 2), "
                         "so a recorder never misses the first commands", integer_range=int_range(1, 100), **ro))

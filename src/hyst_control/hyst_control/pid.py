@@ -14,11 +14,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from hyst_common.limits import CommandLimits
+from hyst_common.params import param
 from hyst_model.core import MBWParams, mbw_step
 
 from .base import BaseController, ModelBased, invert_nu
 from .errors import ConfigError
-from .limits import CommandLimits
 
 __all__ = ["PIDGains", "PID", "OpenLoop"]
 
@@ -45,11 +46,11 @@ class PIDGains:
         Back-calculation time constant (s); smaller = faster unwinding.
     """
 
-    kp: float = 1.0e6
-    ki: float = 8.0e9
-    kd: float = 0.0
-    t_filter: float = 2e-3
-    t_track: float = 5e-3
+    kp: float = param(1.0e6, 0.0, 1e9, "proportional gain (V/m)")
+    ki: float = param(8.0e9, 0.0, 1e13, "integral gain (V/(m s))")
+    kd: float = param(0.0, 0.0, 1e6, "derivative gain (V s/m)")
+    t_filter: float = param(2e-3, 1e-6, 1.0, "derivative filter time constant (s)")
+    t_track: float = param(5e-3, 1e-6, 10.0, "anti-windup back-calculation time constant (s)")
 
     def __post_init__(self) -> None:
         if not all(math.isfinite(v) and v >= 0 for v in (self.kp, self.ki, self.kd)):
@@ -62,6 +63,11 @@ class PID(BaseController):
     """PID with back-calculation anti-windup and filtered derivative on the measurement."""
 
     name = "pid"
+
+    @classmethod
+    def create(cls, model, dt, limits, gains=None, initial="model"):
+        """See :meth:`hyst_control.base.BaseController.create` (no model: feedback only)."""
+        return cls(dt, gains or PIDGains(), limits)
 
     def __init__(self, dt: float, gains: PIDGains = PIDGains(), limits: CommandLimits | None = None) -> None:
         super().__init__(dt, limits)
@@ -114,6 +120,11 @@ class OpenLoop(ModelBased):
     """
 
     name = "open_loop"
+
+    @classmethod
+    def create(cls, model, dt, limits, gains=None, initial="model"):
+        """See :meth:`hyst_control.base.BaseController.create` (no gains)."""
+        return cls(model, dt, limits)
 
     def __init__(self, model: MBWParams, dt: float, limits: CommandLimits | None = None,
                  zeta0: float = 1e-3, exact_rate: bool = True, bump_tau: float = 0.02) -> None:

@@ -32,8 +32,10 @@ class ReferenceNode(AtomicParametersNode):
         d("frequency", 1.0, ParameterDescriptor(description="frequency (Hz)", floating_point_range=fp_range(0, 500)))
         d("offset", 15e-6, ParameterDescriptor(description="offset / start level (m)",
                                                floating_point_range=fp_range(-1e-3, 1e-3)))
-        d("t0", 0.1, ParameterDescriptor(description="start of steps and ramps (s)", floating_point_range=fp_range(0, 1e4)))
-        d("rate", 1000.0, ParameterDescriptor(description="publication rate (Hz)", floating_point_range=fp_range(1, 5000)))
+        d("t0", 0.1, ParameterDescriptor(description="start of steps and ramps (s)",
+                                         floating_point_range=fp_range(0, 1e4)))
+        d("rate", 1000.0, ParameterDescriptor(description="publication rate (Hz)",
+                                              floating_point_range=fp_range(1, 5000)))
         d("duration", 0.0, ParameterDescriptor(description="seconds to run, then hold (0 = forever)",
                                                floating_point_range=fp_range(0, 1e6)))
         self._ref = self._build()

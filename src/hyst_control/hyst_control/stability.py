@@ -44,8 +44,8 @@ from .dppc import DPPCGains
 from .errors import ConfigError
 from .pid import PIDGains
 
-__all__ = ["Resonance", "identified_resonance", "LoopCheck", "StabilityVerdict", "StabilityError", "POLICIES", "resonance_tf",
-           "controller_tf", "plant_tf", "closed_loop_poles", "check_loop", "derate", "guard"]
+__all__ = ["Resonance", "identified_resonance", "LoopCheck", "StabilityVerdict", "StabilityError", "POLICIES",
+           "resonance_tf", "controller_tf", "plant_tf", "closed_loop_poles", "check_loop", "derate", "guard"]
 
 POLICIES = ("derate", "warn", "refuse")
 _G_MAX = 1e3  # gain margins are searched up to this factor (60 dB); beyond it they are reported as inf

@@ -7,7 +7,8 @@ import pytest
 
 from hyst_control.compensation import Compensated, effect_parameters, plan_compensation
 from hyst_control.errors import ConfigError
-from hyst_control.loop import default_plant, make_controller, run_closed_loop
+from hyst_bringup.loop import default_plant, run_closed_loop
+from hyst_control.controllers import make_controller
 from hyst_model.core import pea_default
 
 RATE = 2000.0
@@ -38,7 +39,7 @@ def test_plan_refuses_missing_out_of_range_and_uninvertible_effects():
 
 
 def test_limits_set_on_the_wrapper_reach_the_law():
-    from hyst_control.limits import CommandLimits
+    from hyst_common.limits import CommandLimits
 
     c = make_controller("dppc", pea_default(), DT, compensation=_plan(["creep"], creep__gain=0.01))
     assert isinstance(c, Compensated)

@@ -8,12 +8,12 @@ import time
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 
-from hyst_control.controller_node import ControllerNode  # noqa: E402
+from hyst_control.controller_node import ControllerNode
 
 pytestmark = pytest.mark.ros
 
@@ -103,9 +103,9 @@ def test_params_file_sets_the_model_and_model_updates_apply_at_run_time(harness,
     assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
     pub.publish(_state(0, 10e-6, 50.0))
     assert _spin_until(ex, lambda: len(got["cmd"]) > 0)
-    assert node._ctrl.model.zeta1 == pytest.approx(0.45)  # noqa: SLF001
+    assert node._ctrl.model.zeta1 == pytest.approx(0.45)
     assert node.set_parameters([Parameter("model.delta2", value=0.95)])[0].successful
-    assert node._ctrl.model.delta2 == pytest.approx(0.95)  # noqa: SLF001
+    assert node._ctrl.model.delta2 == pytest.approx(0.95)
 
 
 def test_watchdog_commands_v_safe_and_reports_error(harness):
@@ -123,7 +123,7 @@ def test_watchdog_commands_v_safe_and_reports_error(harness):
     pub.publish(_state(100, 15e-6, 5.0))
     assert _spin_until(ex, lambda: len(got["cmd"]) > n0)
     assert math.isfinite(got["cmd"][-1].effort[0])
-    assert not node._tripped  # noqa: SLF001
+    assert not node._tripped
 
 
 def test_effects_of_a_params_file_are_compensated_or_reported_never_silently_dropped(harness, tmp_path):
@@ -134,15 +134,15 @@ def test_effects_of_a_params_file_are_compensated_or_reported_never_silently_dro
                  "      creep:\n        gain: 0.01\n        tilt: 0.0\n      delay:\n        tau: 0.002\n"
                  "      drift:\n        c1: 1.0e-8\n      hum:\n        amp: 1.0e-9\n")
     node, peer, ex, pub, got = harness("--params-file", str(p))
-    assert node._compensating == ["creep", "delay"]  # noqa: SLF001
-    assert "drift" in node._unused and "model.hum.amp" in node._unused  # noqa: SLF001
-    assert "creep" not in node._unused  # noqa: SLF001
+    assert node._compensating == ["creep", "delay"]
+    assert "drift" in node._unused and "model.hum.amp" in node._unused
+    assert "creep" not in node._unused
     assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
     for k in range(3):
         pub.publish(_state(k, 10e-6, 50.0))
         assert _spin_until(ex, lambda: len(got["cmd"]) > k)
     assert math.isfinite(got["cmd"][-1].effort[0])
-    assert getattr(node._ctrl, "preview", 0.0) == pytest.approx(0.002)  # noqa: SLF001 - the delay's preview
+    assert getattr(node._ctrl, "preview", 0.0) == pytest.approx(0.002)  # the delay's preview
 
     def warned() -> bool:
         return any(s.level >= DiagnosticStatus.WARN and "do not compensate drift" in s.message
@@ -153,7 +153,7 @@ def test_effects_of_a_params_file_are_compensated_or_reported_never_silently_dro
     plain = tmp_path / "plain.yaml"
     plain.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      zeta1: 0.45\n")
     node2, *_ = harness("--params-file", str(plain))
-    assert node2._unused == "" and node2._compensating == []  # noqa: SLF001
+    assert node2._unused == "" and node2._compensating == []
 
 
 def test_an_effect_the_laws_cannot_invert_is_refused_with_a_reason(harness, tmp_path):
@@ -197,8 +197,8 @@ def test_a_pushed_model_with_effects_is_compensated_and_a_plain_push_clears_them
     theta = m.pack({**pea_default().to_dict(), "creep.gain": 0.012, "creep.tilt": 0.0})
     r = node.set_parameters_atomically(controller_parameters(m, theta, 5e-4))
     assert r.successful, r.reason
-    assert node._compensating == ["creep"] and node._unused == ""  # noqa: SLF001
+    assert node._compensating == ["creep"] and node._unused == ""
     plain = BASE_MODELS["mbw"](cfg)
     r = node.set_parameters_atomically(controller_parameters(plain, plain.pack(pea_default().to_dict()), 5e-4))
     assert r.successful, r.reason
-    assert node._compensating == [] and node._settings.effects == ()  # noqa: SLF001
+    assert node._compensating == [] and node._settings.effects == ()

@@ -10,15 +10,16 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 
-from hyst_control.controller_node import ControllerNode  # noqa: E402
-from hyst_control.errors import ControlError  # noqa: E402
-from hyst_control.loop import SimPlant, default_plant, mismatched  # noqa: E402
-from hyst_model.core import MBWParams, pea_default  # noqa: E402
+from hyst_control.controller_node import ControllerNode
+from hyst_control.errors import ControlError
+from hyst_bringup.loop import SimPlant, default_plant
+from hyst_control.controllers import mismatched
+from hyst_model.core import MBWParams, pea_default
 
 pytestmark = pytest.mark.ros
 RATE = 2000.0
@@ -106,7 +107,7 @@ def _lockstep(node, ex, pub, got, plant, n: int, on_sample=None) -> np.ndarray:
 def test_node_derates_on_the_identified_resonance_and_stays_stable(harness, algorithm):
     node, ex, pub, got = harness("-p", f"algorithm:={algorithm}", "-p", "reference:=sine:10", *RES)
     run = node._settings.gains(algorithm)
-    configured = getattr(node._settings, algorithm)
+    configured = node._settings.configured(algorithm)
     assert run != configured and node._settings.stability.warn
     e = _lockstep(node, ex, pub, got, _resonant_plant(), 1600)
     assert e.size == 1600 and np.all(np.isfinite(e))
@@ -122,7 +123,7 @@ def test_node_derates_on_the_identified_resonance_and_stays_stable(harness, algo
 def test_under_policy_warn_the_configured_gains_run_and_the_loop_is_unstable(harness):
     """The counter-test: the same node and stage with the check's advice ignored."""
     node, ex, pub, got = harness("-p", "reference:=sine:10", "-p", "stability.policy:=warn", *RES)
-    assert node._settings.gains("dppc") == node._settings.dppc and node._settings.stability.warn
+    assert node._settings.gains("dppc") == node._settings.configured("dppc") and node._settings.stability.warn
     e = _lockstep(node, ex, pub, got, _resonant_plant(), 1600)
     assert not np.all(np.isfinite(e)) or np.sqrt(np.mean(e[-600:] ** 2)) > 5e-6
 
@@ -134,7 +135,7 @@ def test_a_compensated_resonance_is_tracked_at_the_noise_floor(harness, algorith
     for policy in ("derate", "warn"):
         node, ex, pub, got = harness("-p", f"algorithm:={algorithm}", "-p", "reference:=sine:10",
                                      "-p", f"stability.policy:={policy}", *RES_ZOH)
-        assert node._compensating == ["dynamics"]  # noqa: SLF001
+        assert node._compensating == ["dynamics"]
         e = _lockstep(node, ex, pub, got, _resonant_plant(), 1600)
         assert np.all(np.isfinite(e)) and np.sqrt(np.mean(e[1000:] ** 2)) < 20e-9, policy
 

@@ -8,8 +8,9 @@ from hypothesis import given, settings, strategies as st
 from hyst_control.dmrac import DMRAC, TABLE53, DMRACGains, dmrac_adapt
 from hyst_control.dppc import DPPC
 from hyst_control.errors import ConfigError
-from hyst_control.limits import CommandLimits
-from hyst_control.loop import default_plant, mismatched, run_closed_loop
+from hyst_common.limits import CommandLimits
+from hyst_bringup.loop import default_plant, run_closed_loop
+from hyst_control.controllers import mismatched
 from hyst_model.core import THESIS_TABLE41, mbw_rest_state, mbw_step, pea_default
 
 ZETA0, VARRHO, TMAX = 1e-3, 1e-4, 10.0

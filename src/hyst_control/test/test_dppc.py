@@ -6,8 +6,8 @@ import pytest
 
 from hyst_control.base import invert_nu, mu_select
 from hyst_control.dppc import DPPC, DPPCGains
-from hyst_control.limits import CommandLimits
-from hyst_control.loop import default_plant, run_closed_loop
+from hyst_common.limits import CommandLimits
+from hyst_bringup.loop import default_plant, run_closed_loop
 from hyst_model.core import THESIS_TABLE41, mbw_rest_state, mbw_step, pea_default
 
 WIDE = CommandLimits(-1e6, 1e6, math.inf, 0.0)

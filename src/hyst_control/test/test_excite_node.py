@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 
-from hyst_control.excite_node import ExciteNode  # noqa: E402
-from hyst_sim.sim_node import SimNode  # noqa: E402
+from hyst_control.excite_node import ExciteNode
+from hyst_sim.sim_node import SimNode
 
 pytestmark = pytest.mark.ros
 
@@ -43,7 +43,7 @@ def test_plays_the_excitation_on_a_realtime_stage_time_indexed_and_stops(ctx):
         assert exc.answered >= 0.5 * len(u)  # realtime: some states may be missed under load
         # every command answers a state with its stamp and is the time-indexed excitation sample, except within
         # step_rise after a gap (missed periods under load), where it fades from the held voltage towards it
-        t0 = exc._t_first  # noqa: SLF001
+        t0 = exc._t_first
         # (the fade keeps the offset the gap left, held voltage − excitation, and shrinks it; the excitation itself
         # may move meanwhile, so the command is judged against the offset, not against the previous command)
         t_gap, prev, off = -1.0, None, 0.0
@@ -71,14 +71,14 @@ def test_a_gap_is_faded_in_not_jumped(ctx):
     exc = ExciteNode(context=ctx, parameter_overrides=[Parameter("rate", value=rate), Parameter("parts", value="steps"),
                                                         Parameter("n_steps", value=6), Parameter("hold", value=0.2)])
     sent = []
-    exc._pub.publish = sent.append  # noqa: SLF001 - capture the answers; no graph needed
-    exc._pub.get_subscription_count = lambda: 1  # noqa: SLF001
+    exc._pub.publish = sent.append  # capture the answers; no graph needed
+    exc._pub.get_subscription_count = lambda: 1
     u, rise = exc.excitation.u, exc.spec.step_rise
 
     def answer(k):  # the state stamped k periods after the first
         m = JointState()
         m.header.stamp.sec, m.header.stamp.nanosec = divmod(k * 1_000_000, 1_000_000_000)
-        exc._on_state(m)  # noqa: SLF001
+        exc._on_state(m)
         return sent[-1].effort[0]
 
     try:

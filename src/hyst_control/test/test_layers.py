@@ -3,8 +3,8 @@ import subprocess
 import sys
 
 CORE = ("hyst_control", "hyst_control.base", "hyst_control.dppc", "hyst_control.dmrac", "hyst_control.pid",
-        "hyst_control.limits", "hyst_control.reference", "hyst_control.loop", "hyst_control.cli_track",
-        "hyst_control.demo", "hyst_control.stability", "hyst_control.compensation", "hyst_control.controller_settings")
+        "hyst_control.reference", "hyst_control.controllers", "hyst_bringup.loop", "hyst_bringup.cli_track",
+        "hyst_bringup.demo", "hyst_control.stability", "hyst_control.compensation", "hyst_control.controller_settings")
 
 
 def test_core_and_cli_modules_do_not_import_rclpy():

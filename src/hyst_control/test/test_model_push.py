@@ -4,7 +4,9 @@ model state) in the new scaling."""
 import numpy as np
 import pytest
 
-from hyst_control.loop import default_plant, make_controller, mismatched
+from hyst_bringup.loop import default_plant
+
+from hyst_control.controllers import make_controller, mismatched
 from hyst_control.reference import parse_reference
 from hyst_model.core import MBWParams, pea_default
 

@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from hyst_control.base import hand_over
-from hyst_control.limits import CommandLimits
-from hyst_control.loop import ALGORITHMS, default_plant, make_controller, mismatched, run_closed_loop
+from hyst_common.limits import CommandLimits
+from hyst_bringup.loop import default_plant, run_closed_loop
+from hyst_control.controllers import ALGORITHMS, make_controller, mismatched
 from hyst_control.pid import PID, PIDGains
 from hyst_control.reference import parse_reference
 from hyst_model.core import pea_default
@@ -39,7 +40,8 @@ def test_pid_anti_windup_limits_overshoot_after_saturation():
 
     good = run(5e-4)
     windup = run(1e3)  # effectively no back-calculation
-    t_settle = lambda ys: np.argmax(np.abs(ys - 15e-6) < 0.1e-6)  # noqa: E731
+    def t_settle(ys):
+        return np.argmax(np.abs(ys - 15e-6) < 0.1e-6)
     assert t_settle(good) < 100  # 50 ms
     assert t_settle(windup) > 2 * t_settle(good)
 

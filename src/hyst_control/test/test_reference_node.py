@@ -4,12 +4,12 @@ import time
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 
-from hyst_control.reference import Reference  # noqa: E402
-from hyst_control.reference_node import ReferenceNode  # noqa: E402
+from hyst_control.reference import Reference
+from hyst_control.reference_node import ReferenceNode
 
 pytestmark = pytest.mark.ros
 
@@ -31,7 +31,7 @@ def test_publishes_sine_with_rate_and_validates_parameters():
             ex.spin_once(timeout_sec=0.01)
         assert len(got) >= 40
         ref = Reference("sine", 10e-6, 2.0, 15e-6)
-        t0 = node._t_start  # noqa: SLF001 - ns of the trajectory's t = 0
+        t0 = node._t_start  # ns of the trajectory's t = 0
         for m in got:
             r, v = ref.sample((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec - t0) * 1e-9)
             assert m.position[0] == pytest.approx(r, abs=1e-12)

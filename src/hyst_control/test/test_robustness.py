@@ -4,7 +4,8 @@ import pytest
 
 from hyst_control.dmrac import DMRACGains
 from hyst_control.dppc import DPPCGains
-from hyst_control.loop import ALGORITHMS, default_plant, make_controller, mismatched, run_closed_loop
+from hyst_bringup.loop import default_plant, run_closed_loop
+from hyst_control.controllers import ALGORITHMS, make_controller, mismatched
 from hyst_control.pid import PIDGains
 from hyst_model.core import pea_default
 

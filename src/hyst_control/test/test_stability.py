@@ -7,7 +7,8 @@ import pytest
 
 from hyst_control.dmrac import DMRACGains
 from hyst_control.dppc import DPPCGains
-from hyst_control.loop import ALGORITHMS, SimPlant, make_controller, run_closed_loop
+from hyst_bringup.loop import SimPlant, run_closed_loop
+from hyst_control.controllers import ALGORITHMS, make_controller
 from hyst_control.pid import PIDGains
 from hyst_control.stability import (Resonance, StabilityError, check_loop, closed_loop_poles, controller_tf, guard,
                                     plant_tf, resonance_tf)

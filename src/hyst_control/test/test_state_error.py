@@ -2,7 +2,9 @@
 import numpy as np
 import pytest
 
-from hyst_control.loop import ALGORITHMS, default_plant, make_controller
+from hyst_bringup.loop import default_plant
+
+from hyst_control.controllers import ALGORITHMS, make_controller
 from hyst_control.reference import parse_reference
 from hyst_model.core import pea_default
 

@@ -88,6 +88,11 @@ class Adapter(ABC):
         #: Samples missing according to sequence numbers (streaming protocols).
         self.lost_samples = 0
 
+    @classmethod
+    def create(cls, counts_to_m: float, v_plausible: tuple[float, float]) -> Adapter:
+        """Build from the uniform arguments of :func:`make_adapter`; each protocol takes what it uses."""
+        return cls(v_plausible)
+
     @abstractmethod
     def identify(self) -> bytes:
         """Bytes that ask the device to identify itself (answered by :class:`Identified`)."""
@@ -146,6 +151,11 @@ class AsciiAdapter(Adapter):
     name = "ascii"
     streaming = True
     quantum = 1.0 / hdb.UV_PER_V
+
+    @classmethod
+    def create(cls, counts_to_m: float, v_plausible: tuple[float, float]) -> Adapter:
+        """See :meth:`Adapter.create` (``counts_to_m``: metres per sensor count)."""
+        return cls(counts_to_m, v_plausible)
 
     def __init__(self, counts_to_m: float = 2e-9, v_plausible: tuple[float, float] = (-1000.0, 1000.0)) -> None:
         super().__init__(v_plausible)
@@ -324,8 +334,12 @@ class GcsAdapter(Adapter):
         return events
 
 
-#: Protocol names accepted by :func:`make_adapter` (and the ``protocol`` parameter).
-PROTOCOLS = ("ascii", "gcs")
+#: The protocols by name (a registry as data: :func:`make_adapter` and the ``protocol`` parameter read it). Adding
+#: one is its codec module, its :class:`Adapter` subclass, and one line here.
+PROTOCOLS: dict[str, type[Adapter]] = {
+    "ascii": AsciiAdapter,
+    "gcs": GcsAdapter,
+}
 
 
 def make_adapter(protocol: str, counts_to_m: float = 2e-9,
@@ -337,8 +351,7 @@ def make_adapter(protocol: str, counts_to_m: float = 2e-9,
     ConfigError
         Unknown protocol name.
     """
-    if protocol == "ascii":
-        return AsciiAdapter(counts_to_m, v_plausible)
-    if protocol == "gcs":
-        return GcsAdapter(v_plausible)
-    raise ConfigError(f"unknown protocol {protocol!r}; choose one of {', '.join(PROTOCOLS)}")
+    cls = PROTOCOLS.get(protocol)
+    if cls is None:
+        raise ConfigError(f"unknown protocol {protocol!r}; choose one of {', '.join(PROTOCOLS)}")
+    return cls.create(counts_to_m, v_plausible)

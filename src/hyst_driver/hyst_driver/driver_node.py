@@ -27,9 +27,8 @@ from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 from hyst_common.node import AtomicParametersNode, fp_range, int_range
-
+from hyst_common.profiles import GMA, PEA, get_profile
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
-from hyst_sim.profiles import get_profile
 
 from .adapter import PROTOCOLS, make_adapter
 from .errors import ConfigError, DriverError
@@ -84,7 +83,7 @@ class DriverConfig:
 
 def param_table(prof) -> list[tuple[str, object, tuple | None, str]]:
     """``(name, default, range, description)`` of every parameter but ``profile``: the one table behind the
-    declarations and ``--help``. Limits default to, and are ranged by, the profile (:mod:`hyst_sim.profiles`)."""
+    declarations and ``--help``. Limits default to, and are ranged by, the profile (:mod:`hyst_common.profiles`)."""
     lo, hi = prof.v_min, prof.v_max
     return [
         ("port", "", None, "serial device or pty path (a stable /dev/serial/by-id/... link survives replugs)"),
@@ -107,7 +106,6 @@ def param_table(prof) -> list[tuple[str, object, tuple | None, str]]:
 
 def usage() -> str:
     """``--help`` text: what the node does and every parameter with default and range (PEA; GMA differs)."""
-    from hyst_sim.profiles import GMA, PEA
 
     lines = ["usage: hyst_driver_node --ros-args -p port:=PATH [-p NAME:=VALUE ...]", "",
              __doc__.strip(), "", "parameters (defaults for profile pea; gma: v_min -5, v_max 5, v_safe 0, "
@@ -206,7 +204,7 @@ class DriverNode(AtomicParametersNode):
                 readings = link.service()
                 if readings:
                     self._publish_states(readings, clock)
-            except Exception as err:  # a bug must not silently end the I/O (the watchdog ramp lives here)
+            except Exception as err:  # noqa: BLE001 - a bug must not silently end the I/O (the watchdog ramp lives here)
                 self.io_errors += 1
                 if self.io_errors == 1 or self.io_errors % 1000 == 0:
                     self.get_logger().error(f"I/O loop error #{self.io_errors}: {type(err).__name__}: {err}")

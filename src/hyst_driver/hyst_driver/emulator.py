@@ -1,13 +1,14 @@
-"""hyst_emulator: a fake amplifier + displacement sensor on a pty pair, driven by the sim's :class:`Plant`.
+"""hyst_emulator: a fake amplifier + displacement sensor on a pty pair, driven by an injected stage plant.
 
 For tests and for users without hardware::
 
     hyst_emulator --profile pea --rate 1000            # prints the port path, serves until Ctrl-C
     hyst_driver_node --ros-args -p port:=/tmp/hyst_emulator_XXXX/tty
 
-It speaks both protocols at once (a line starting with ``$`` is HDB/1, anything else GCS-like), steps the same
-plant code as the sim (``hyst_sim.plant``) once per sample with the voltage last set, and can inject every fault
-the driver must survive: ``garbage`` bytes, ``partial`` lines, ``checksum`` corruption, ``timeout`` (silence),
+It speaks both protocols at once (a line starting with ``$`` is HDB/1, anything else GCS-like), steps the plant it
+is given once per sample with the voltage last set (the console script ``hyst_emulator``, :mod:`hyst_bringup.emulator`,
+gives it the sim's ``hyst_sim.plant.Plant``: the driver package does not depend on the sim), and can inject every
+fault the driver must survive: ``garbage`` bytes, ``partial`` lines, ``checksum`` corruption, ``timeout`` (silence),
 device ``error`` replies, and ``unplug`` (the port vanishes and comes back at the same path, like a USB device
 behind a ``/dev/serial/by-id`` link: the path is a symlink re-pointed at a fresh pty).
 """
@@ -43,8 +44,10 @@ class EmulatedDevice:
 
     Parameters
     ----------
-    plant : hyst_sim.plant.Plant
-        Stage model; its own amplifier clip (profile range and slew) is the device-side clamp.
+    plant : object
+        Stage model, e.g. ``hyst_sim.plant.Plant`` (injected: this package does not import the sim). Used:
+        ``config`` (``v_min``, ``v_max``, ``dt``), ``u_applied``, ``step(v)`` and ``reset(v)``; its own amplifier
+        clip (profile range and slew) is the device-side clamp.
     counts_to_m : float
         Sensor resolution (m per count) for HDB/1 ``P`` samples.
     """
@@ -370,31 +373,27 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     return ap.parse_args(argv)
 
 
-def build_device(profile: str = "pea", rate: float = 1000.0, scenario: str | None = None,
-                 params_file: str | None = None, seed: int = 0) -> EmulatedDevice:
-    """An :class:`EmulatedDevice` on the sim's plant for a profile (optionally a scenario / params file)."""
-    from hyst_sim.plant import Plant, PlantConfig
-    from hyst_sim.profiles import get_profile
-
-    if params_file:
-        cfg = PlantConfig.from_params_file(params_file, profile, rate, seed=seed)
-    else:
-        cfg = PlantConfig.for_profile(profile, rate, seed=seed)
-    if scenario:
-        cfg = PlantConfig.from_scenario(scenario, base=cfg)
-    return EmulatedDevice(Plant(cfg), get_profile(profile).sensor_resolution)
-
-
 def _raise_interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Console script ``hyst_emulator``."""
+def main(argv: list[str] | None = None, *, build=None) -> int:
+    """The ``hyst_emulator`` command around an injected device factory.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command-line arguments (``sys.argv[1:]`` if omitted).
+    build : callable
+        ``build(profile, rate, scenario, params_file, seed) -> EmulatedDevice``; the console script
+        (:func:`hyst_bringup.emulator.main`) passes one on the sim's plant.
+    """
+    if build is None:
+        raise TypeError("main() needs build=: a factory of EmulatedDevice (see hyst_bringup.emulator)")
     args = _parse(argv)
     try:
         rates = FaultRates.parse(args.faults)
-        dev = build_device(args.profile, args.rate, args.scenario, args.params_file, args.seed)
+        dev = build(args.profile, args.rate, args.scenario, args.params_file, args.seed)
     except (ValueError, OSError) as err:
         print(f"hyst_emulator: {err}", file=sys.stderr)
         return 2
@@ -434,7 +433,3 @@ def main(argv: list[str] | None = None) -> int:
         emu.stop()
         print(f"hyst_emulator: stopped; faults injected {emu.injected}", flush=True)
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -14,6 +14,12 @@ Pure (no I/O, no clock): callers pass time steps. Invariants, proven by the prop
 When the limits change so that the present output falls outside the new window, the output moves into the
 window at once (invariant 1 wins over 2).
 
+Each step's range-and-slew arithmetic is the one core every hyst limiter shares,
+:func:`hyst_common.limits.limit_step` (on integer grid indices); what is the driver's own, and why it is a wrapper
+rather than the controller's or the sim's limiter, is everything around it: requests are checked before they
+become a target, the output is quantised to the wire, a step is credited at most one device sample, and the
+in-flight envelope is judged against the voltage the device reports it applies.
+
 Invariant 2 bounds consecutive *writes*; the amplifier, though, applies the last setpoint it has received at
 each of its own samples, so two writes delivered within one device sample make one double step (measured: 20.4–
 26.5 V against a 20 V-per-sample limit with three CPU hogs beside the driver). A host clock cannot prevent that;
@@ -37,6 +43,8 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 from functools import cached_property
+
+from hyst_common.limits import LIMIT_SLEW, limit_step
 
 from .errors import ConfigError
 
@@ -324,14 +332,15 @@ class VoltageLimiter:
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             dt = 0.0
         step = lim.slew_max * min(dt, lim.dt_max)  # the hard limit: what the amplifier sees per sample
-        if self._safe and math.isfinite(lim.safe_ramp_rate):  # the gentler ramp follows real time (a late write catches up), never above the hard limit
+        # the gentler ramp follows real time (a late write catches up), never above the hard limit
+        if self._safe and math.isfinite(lim.safe_ramp_rate):
             step = min(step, lim.safe_ramp_rate * min(dt, self.RAMP_DT_MAX))
         max_dk = math.floor(step / lim.quantum)
-        dk = self._target_k - self._k
-        if abs(dk) > max_dk:
+        # The one range-and-slew core (hyst_common.limits) on grid indices: target and output are always in the
+        # window here (request, reset and set_limits bring them in), so it is the slew step alone.
+        k, flags = limit_step(self._target_k, lim.lo_q, lim.hi_q, self._k, max_dk)
+        if flags & LIMIT_SLEW:
             self.counts.slew_limited += 1
-            dk = max_dk if dk > 0 else -max_dk
-        k = self._clamp_k(self._k + dk)
         self.hold = False
         if not self.track_flight:
             self._k = k

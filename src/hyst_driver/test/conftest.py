@@ -7,8 +7,9 @@ import time
 
 import pytest
 
+from hyst_bringup.emulator import build_device
 from hyst_driver.adapter import make_adapter
-from hyst_driver.emulator import PtyEmulator, build_device
+from hyst_driver.emulator import PtyEmulator
 from hyst_driver.safety import Limits
 from hyst_driver.transport import DeviceLink, SerialTransport
 

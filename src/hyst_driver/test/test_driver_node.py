@@ -14,7 +14,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from hyst_driver.emulator import FAULTS, PtyEmulator, build_device
+from hyst_bringup.emulator import build_device
+from hyst_driver.emulator import FAULTS, PtyEmulator
 
 pytestmark = pytest.mark.ros
 
@@ -287,7 +288,7 @@ def test_node_survives_every_fault_class_and_ramps_to_safe_on_sigint(ctx, emu):
 
 def test_help_lists_every_parameter_and_exits_0(capsys):
     from hyst_driver.driver_node import main, param_table
-    from hyst_sim.profiles import PEA
+    from hyst_common.profiles import PEA
 
     assert main(["hyst_driver_node", "--help"]) == 0
     out = capsys.readouterr().out

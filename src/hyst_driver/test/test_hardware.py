@@ -24,7 +24,7 @@ def link(request):
     port = request.config.getoption("--device")
     if not port:
         pytest.skip("hardware test: give --device PORT")
-    from hyst_sim.profiles import get_profile
+    from hyst_common.profiles import get_profile
 
     prof = get_profile(os.environ.get("HYST_DEVICE_PROFILE", "pea"))
     span = prof.v_max - prof.v_min

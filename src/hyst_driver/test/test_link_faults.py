@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import pytest
 
+from hyst_driver.adapter import PROTOCOLS
+
 RUNS = 100
-PROTOCOLS = ("ascii", "gcs")
 
 
 #: Deadline (s) of every wait: generous, a deadline only decides when a hung test gives up.

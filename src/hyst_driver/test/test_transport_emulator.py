@@ -12,8 +12,9 @@ import time
 import pytest
 import serial
 
+from hyst_bringup.emulator import build_device
 from hyst_driver import protocol_ascii as hdb
-from hyst_driver.emulator import EmulatedDevice, FaultRates, PtyEmulator, build_device
+from hyst_driver.emulator import EmulatedDevice, FaultRates, PtyEmulator
 from hyst_driver.errors import LinkError
 from hyst_driver.transport import SerialTransport
 
@@ -114,7 +115,7 @@ def test_fault_rates_parse():
 
 
 def _emulator_cmd(*args):
-    return [sys.executable, "-c", "import sys; from hyst_driver.emulator import main; sys.exit(main())", *args]
+    return [sys.executable, "-c", "import sys; from hyst_bringup.emulator import main; sys.exit(main())", *args]
 
 
 def test_cli_bad_input_is_one_line_and_exit_2():

@@ -30,19 +30,21 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import String
 
+from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+
 from .core.mbw import PARAM_NAMES
 from .errors import HystError
-from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from .identify.methods import METHODS
 
 __all__ = ["IdentConfig", "IdentNode", "main", "fit_bag", "controller_parameters"]
 
-_METHODS = ("fast", "epso", "lsq")
 
 USAGE = (
     'hyst_ident_node: refit the stage model from rosbag2 recordings (given bags or a watched folder), write the\n'
     'ROS 2 params file and optionally push model.* to a running controller node.\n'
     '\n'
-    'usage: hyst_ident_node [--ros-args -p bags:=[...] -p watch_dir:=DIR -p params_file:=P -p controller_node:=/hyst_controller ...]\n'
+    'usage: hyst_ident_node [--ros-args -p bags:=[...] -p watch_dir:=DIR -p params_file:=P '
+    '-p controller_node:=/hyst_controller ...]\n'
     'Parameters are documented in the module docstring and README.'
 )
 
@@ -74,8 +76,8 @@ class IdentConfig:
         from .io.regular import GAP_POLICIES
         if self.gaps not in GAP_POLICIES:
             raise ValueError(f"gaps must be one of {', '.join(GAP_POLICIES)}")
-        if self.method not in _METHODS:
-            raise ValueError(f"method must be one of {', '.join(_METHODS)}")
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {', '.join(METHODS)}")
         if self.watch_dir and not Path(self.watch_dir).is_dir():
             raise ValueError(f"watch_dir {self.watch_dir!r} is not a directory")
         if self.params_file and not Path(self.params_file).parent.is_dir():
@@ -133,7 +135,8 @@ def controller_parameters(model, theta, dt: float) -> list[Parameter]:
         if not type(e).__module__.startswith("hyst_model.effects."):
             continue  # a user effect: the controller does not declare its keys, it names the effect as unused
         for p in e.params():
-            out.append(Parameter(f"model.{e.name}.{p.name}", Parameter.Type.DOUBLE, float(values[f"{e.name}.{p.name}"])))
+            out.append(Parameter(f"model.{e.name}.{p.name}", Parameter.Type.DOUBLE,
+                                 float(values[f"{e.name}.{p.name}"])))
         for k, v in e.config().items():
             kind = Parameter.Type.STRING if isinstance(v, str) else Parameter.Type.DOUBLE
             out.append(Parameter(f"model.{e.name}.{k}", kind, v if isinstance(v, str) else float(v)))
@@ -182,7 +185,7 @@ class IdentNode(AtomicParametersNode):
         d("topic", "/stage/state", ParameterDescriptor(description="JointState topic with the stage state"))
         d("model", "mbw", ParameterDescriptor(description="base model: mbw | bw | pi"))
         d("effects", S, ParameterDescriptor(description="effects composed onto the base (hyst_model.effects)"))
-        d("method", "fast", ParameterDescriptor(description="identifier: fast | epso | lsq"))
+        d("method", "fast", ParameterDescriptor(description="identifier: " + " | ".join(METHODS)))
         d("seed", -1, ParameterDescriptor(description="random seed for epso (-1 = random)",
                                           integer_range=int_range(-1, 2**31 - 1)))
         d("val_fraction", 0.25, ParameterDescriptor(description="held-out tail of each bag for validation (0 = none)",
@@ -271,7 +274,7 @@ class IdentNode(AtomicParametersNode):
                 self.get_logger().error(f"{bag}: {err}")
                 self._publish({"bag": bag, "error": str(err)})
                 return
-            except Exception as err:  # a broken bag or model must not take the node down
+            except Exception as err:  # noqa: BLE001 - a broken bag or model must not take the node down
                 self.get_logger().error(f"{bag}: fit failed ({type(err).__name__}: {err})")
                 self._publish({"bag": bag, "error": f"{type(err).__name__}: {err}"})
                 return
@@ -340,7 +343,7 @@ class IdentNode(AtomicParametersNode):
                 self.get_logger().info(f"pushed model to {node_name}" if ok else
                                        f"{node_name} rejected the model: {r.reason}")
                 self._publish({"bag": summary["bag"], "push": "accepted" if ok else f"rejected: {r.reason}"})
-            except Exception as err:  # service went away mid-call
+            except Exception as err:  # noqa: BLE001 - service went away mid-call
                 self.get_logger().error(f"push to {node_name} failed: {err}")
         fut.add_done_callback(done)
 

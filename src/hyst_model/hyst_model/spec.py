@@ -44,7 +44,7 @@ def build_model(base: str, effects: Sequence[str] = (), config: Mapping[str, obj
     if not effects:
         return model
     try:
-        from .effects import EFFECTS, compose  # noqa: PLC0415
+        from .effects import EFFECTS, compose
     except ImportError as err:
         raise EffectError(f"effects {', '.join(effects)} requested but no effects are available in this "
                           f"installation ({err})") from None

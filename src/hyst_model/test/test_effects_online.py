@@ -129,5 +129,5 @@ def test_series_resonance_inverse_and_predictor_are_exact_on_the_model(fn, zeta)
     xt = []
     for k in range(r.size):
         xt.append(inv2.target(float(r[k]), float(u[k])))
-        inv2._s = inv2._phi @ inv2._s + inv2._g * xt[-1]  # noqa: SLF001 - the stage achieved the target
+        inv2._s = inv2._phi @ inv2._s + inv2._g * xt[-1]  # the stage achieved the target
     assert np.max(np.abs(series_filter(np.array(xt), fn, zeta, DT, "zoh")[1:] - r[1:])) < 1e-12

@@ -41,7 +41,8 @@ def test_creep_after_a_step_grows_linearly_in_log_time_and_settles_to_the_static
     x = 1e-7 * u
     step = 1e-5
     # per decade of time after the step the output gains gain·Δ = 2 % of the step (0.1 s … 10 s window)
-    at = lambda s: y[int((1.0 + s) / dt)]  # noqa: E731
+    def at(s):
+        return y[int((1.0 + s) / dt)]
     d1, d2 = at(1.0) - at(0.1), at(10.0) - at(1.0)
     assert d1 == pytest.approx(0.02 * step, rel=0.15) and d2 == pytest.approx(0.02 * step, rel=0.15)
     assert y[-1] == pytest.approx(x[-1], rel=5e-3)           # long hold: back to the base model's static map

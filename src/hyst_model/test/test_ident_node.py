@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from rcl_interfaces.msg import SetParametersResult  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.node import Node  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
 
-from hyst_model.core import PARAM_NAMES, pea_default  # noqa: E402
-from hyst_model.ident_node import IdentNode  # noqa: E402
-from hyst_model.io import read_params, write_state_bag  # noqa: E402
+from hyst_model.core import PARAM_NAMES, pea_default
+from hyst_model.ident_node import IdentNode
+from hyst_model.io import read_params, write_state_bag
 
 pytestmark = pytest.mark.ros
 TRUE = pea_default().replace(offset=-1.0e-6)
@@ -73,7 +73,8 @@ def test_fits_bag_writes_params_and_pushes_to_controller(tmp_path, ctx):
         for k in KEYS:
             v = spec.values.get(k, spec.config.get(k))
             assert ctrl.get_parameter(f"model.{k}").value == pytest.approx(v, rel=1e-12, abs=1e-300)
-        g = lambda k: ctrl.get_parameter(f"model.{k}").value  # noqa: E731
+        def g(k):
+            return ctrl.get_parameter(f"model.{k}").value
         assert g("dt") == pytest.approx(5e-4, rel=1e-9)     # the rate the model was identified at is pushed too
         # the small-signal gain ζ1·y_scale/u_scale (m/V) is scale-free and must match the truth
         assert g("zeta1") * g("y_scale") / g("u_scale") == pytest.approx(TRUE.zeta1 * TRUE.y_scale / TRUE.u_scale,

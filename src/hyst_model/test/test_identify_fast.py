@@ -16,7 +16,8 @@ def _record(n=8000, seed=0, params=TRUE):
     rng = np.random.default_rng(seed)
     t = np.arange(n) * 5e-4
     f = rng.uniform(0.5, 20, 3)
-    u = 75 + 40 * np.sin(2 * np.pi * f[0] * t) + 25 * np.sin(2 * np.pi * f[1] * t + 1) + 10 * np.sin(2 * np.pi * f[2] * t)
+    u = (75 + 40 * np.sin(2 * np.pi * f[0] * t) + 25 * np.sin(2 * np.pi * f[1] * t + 1)
+         + 10 * np.sin(2 * np.pi * f[2] * t))
     y = params.simulate(u) + rng.normal(0, NOISE, n)
     return t, u, np.round(y / 2e-9) * 2e-9
 

@@ -29,13 +29,15 @@ def test_mcap_is_chunk_compressed(tmp_path):
     t, u, y = _data(2000)
     write_state_bag(tmp_path / "z", t, u, y)
     write_state_bag(tmp_path / "raw", t, u, y, compress=False)
-    size = lambda p: sum(f.stat().st_size for f in p.glob("*.mcap"))  # noqa: E731
+    def size(p):
+        return sum(f.stat().st_size for f in p.glob("*.mcap"))
     assert size(tmp_path / "z") < 0.7 * size(tmp_path / "raw")
 
 
 def test_extra_topics_and_named_columns(tmp_path):
     t, u, y = _data(50)
-    extra = {"/controller/state": {"t": t[:10], "name": ["error", "nu"], "position": np.c_[np.arange(10), -np.arange(10)]}}
+    extra = {"/controller/state": {"t": t[:10], "name": ["error", "nu"],
+                                   "position": np.c_[np.arange(10), -np.arange(10)]}}
     write_state_bag(tmp_path / "b", t, u, y, extra=extra)
     topics = list_topics(tmp_path / "b")
     assert topics == {"/stage/state": ("sensor_msgs/msg/JointState", 50),

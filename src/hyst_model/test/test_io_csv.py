@@ -28,7 +28,8 @@ def test_columns_and_units_convert_to_si(tmp_path):
     np.testing.assert_allclose(read_csv(p, columns="time_ms,voltage_V,displacement_um").y, rec.y)
 
 
-#: The public piezo record lives beside the checkout (../shared/data, see README "Data"); a user's clone may not have it.
+#: The public piezo record lives beside the checkout (../shared/data, see README "Data"); a user's clone may not
+#: have it.
 PIEZO = Path(__file__).resolve().parents[4] / "shared" / "data" / "piezo_150V_1Hz" / "piezo_150V_1Hz.csv"
 
 

@@ -7,16 +7,16 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from builtin_interfaces.msg import Time  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
+from builtin_interfaces.msg import Time
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 
-from hyst_model.core.params import pea_default  # noqa: E402
-from hyst_model.io.params_file import spec_from_model, write_params  # noqa: E402
-from hyst_model.model import MBWModel  # noqa: E402
-from hyst_model.residual_node import ResidualNode  # noqa: E402
-from hyst_model.spec import build_model  # noqa: E402
+from hyst_model.core.params import pea_default
+from hyst_model.io.params_file import spec_from_model, write_params
+from hyst_model.model import MBWModel
+from hyst_model.residual_node import ResidualNode
+from hyst_model.spec import build_model
 
 pytestmark = pytest.mark.ros
 DT = 1e-3

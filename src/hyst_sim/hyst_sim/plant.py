@@ -18,7 +18,8 @@ emulator and the diagnosis tests all build on this API::
 Signal chain per sample ``k`` (see :mod:`hyst_sim.truth_effects` for each effect)::
 
     u_cmd ─ clip to [v_min, v_max] and slew_max·dt (NaN/inf hold the last value) ─▶ u_applied
-    u_applied ─ delay ─▶ MBW(u/u_scale) held within the end stops · y_scale + offset ─ asymmetry ─ creep ─ saturation ─ dynamics ─▶ x
+    u_applied ─ delay ─▶ MBW(u/u_scale) held within the end stops · y_scale + offset
+              ─ asymmetry ─ creep ─ saturation ─ dynamics ─▶ x
     x ─ + drift ─ + noise ─ quantisation ─▶ y (what the sensor reports)
 
 With every effect off, ``y`` equals :meth:`hyst_model.core.MBWParams.simulate` of the applied voltage exactly
@@ -40,14 +41,17 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hyst_model.core import MBWParams, mbw_rest_state
+from hyst_common.limits import LIMIT_NONFINITE as CLIP_NONFINITE
+from hyst_common.limits import LIMIT_RANGE as CLIP_RANGE
+from hyst_common.limits import LIMIT_SLEW as CLIP_SLEW
+from hyst_common.profiles import get_profile
+from hyst_model.core import MBWParams, mbw_rest_state, stage_model
 
 from .errors import ConfigError, SimError
 from .plant_kernel import (F_ASYM, F_CREEP, F_DA, F_DELAY, F_DQ, F_DR, F_DT, F_DW, F_DYN, F_HALF, F_NOISE, F_OFF,
                            F_QUANT, F_SAT, F_SATHI, F_SATLO, F_SATW, F_STEP, F_SUB, F_US, F_VMAX, F_VMIN, F_XMID,
                            F_YS, F_YSTOPHI, F_YSTOPLO, N_F, S_DIDX, S_DT_T, S_T, S_UA, S_UM, S_X, S_XQ, S_Y,
                            _plant_loop)
-from .profiles import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, get_profile
 from .stroke import check_bounded, rest_stroke
 from .truth_effects import Effects, asymmetry_kernel, saturation_kernel
 
@@ -156,7 +160,7 @@ class PlantConfig:
         effects = overrides.pop("effects", Effects())
         if sensor:
             effects = effects.with_strengths(noise=prof.sensor_noise, quantization=prof.sensor_resolution)
-        kw = dict(mbw=mbw if mbw is not None else prof.model(), dt=1.0 / rate, v_min=prof.v_min,
+        kw = dict(mbw=mbw if mbw is not None else stage_model(prof.name), dt=1.0 / rate, v_min=prof.v_min,
                   v_max=prof.v_max, slew_max=prof.slew_max, v_init=prof.v_safe, effects=effects, seed=seed)
         kw.update(overrides)
         return cls(**kw)

@@ -10,8 +10,14 @@ from numba import njit
 
 from hyst_model.core import mbw_step
 
-from .profiles import clip_kernel
+from hyst_common.limits import limit_step
+
 from .truth_effects import asymmetry_kernel, creep_kernel, dynamics_kernel, saturation_kernel
+
+#: The one range-and-slew limiter (:func:`hyst_common.limits.limit_step`), compiled for the loop below: the
+#: simulated amplifier's clamp. Its wrapper in the loop makes any non-finite command (±inf too) hold the voltage
+#: applied one sample earlier, flagged, as an amplifier ignores a corrupted setpoint.
+clip_kernel = njit(cache=True)(limit_step)
 
 # Indices into the packed float settings (_F) and state (_S) arrays of the compiled loop.
 (F_US, F_YS, F_OFF, F_VMIN, F_VMAX, F_STEP, F_SUB, F_ASYM, F_XMID, F_HALF, F_CREEP, F_SAT, F_SATLO, F_SATHI,
@@ -26,7 +32,10 @@ def _plant_loop(u_cmd, p, f, st, creep_a, creep_c, phi, gam, dz, dbuf, normals, 
     n_delay = int(f[F_DELAY])
     n_sub = int(f[F_SUB])
     for k in range(u_cmd.shape[0]):
-        ua, flags = clip_kernel(u_cmd[k], f[F_VMIN], f[F_VMAX], st[S_UA], f[F_STEP])
+        uc = u_cmd[k]
+        if not math.isfinite(uc):  # ±inf too: held (limit_step saturates ±inf, holds NaN)
+            uc = math.nan
+        ua, flags = clip_kernel(uc, f[F_VMIN], f[F_VMAX], st[S_UA], f[F_STEP])
         st[S_UA] = ua
         ue = ua
         if n_delay > 0:

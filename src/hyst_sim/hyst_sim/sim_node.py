@@ -20,8 +20,8 @@ Modes
 ``lockstep`` (deterministic tests)
     Sample 0 (the stage at rest at ``v_safe``) is published, stamped 0 s, as soon as ``/stage/state`` has
     ``wait_for_subscribers`` subscribers (default 1; 2 with a recorder: ``hyst_bag_record`` started first then
-    never misses the start) and ``/stage/command`` a publisher, and re-published with the *same* stamp every 0.5 s until it
-    is answered. Each command whose ``header.stamp`` equals the latest state's stamp takes exactly one sample
+    never misses the start) and ``/stage/command`` a publisher, and re-published with the *same* stamp every 0.5 s
+    until it is answered. Each command whose ``header.stamp`` equals the latest state's stamp takes exactly one sample
     and publishes state ``k+1`` stamped ``(k+1)/rate`` s; commands with any other stamp (duplicates, answers to
     a repeated state) are dropped and counted as stale. Same parameters and seed → same data, bit for bit.
     A reliable subscriber slower than the loop (a recorder on a busy machine) slows the run instead of losing
@@ -29,9 +29,9 @@ Modes
 
 Health on ``/diagnostics`` (every second): ``hyst_sim: stage`` — the stage on its end stop (an input the model
 cannot follow, a diverging model) is an ERROR, never a number; clipping, timeouts, missed periods a WARN.
-``hyst_sim: timing`` — missed realtime periods with their share of the second (a WARN, an ERROR above 10 %). Parameter sets are all or nothing: :meth:`SimNode.set_parameters`
-and the node's ``set_parameters`` service (rclpy's sets each parameter alone) validate the whole resulting
-configuration and apply every parameter or none.
+``hyst_sim: timing`` — missed realtime periods with their share of the second (a WARN, an ERROR above 10 %). Parameter
+sets are all or nothing: :meth:`SimNode.set_parameters` and the node's ``set_parameters`` service (rclpy's sets each
+parameter alone) validate the whole resulting configuration and apply every parameter or none.
 """
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .errors import SimError
 from .plant import Plant
-from .profiles import get_profile
+from hyst_common.profiles import V_SPAN, get_profile
 from .sim_settings import SimSettings, plant_config
 from .truth_effects import EFFECT_NAMES, Effects
 
@@ -117,7 +117,8 @@ class SimNode(AtomicParametersNode):
         self.create_timer(_DIAG_PERIOD, self._publish_diagnostics)
         self.get_logger().info(
             f"simulated stage: profile {self._settings.profile}, {self._settings.rate:g} Hz, mode "
-            f"{self._settings.mode}, model {'from ' + self._settings.params_file if self._settings.params_file else 'embedded default'}"
+            f"{self._settings.mode}, model "
+            f"{'from ' + self._settings.params_file if self._settings.params_file else 'embedded default'}"
             f"{', scenario loaded' if self._settings.scenario_file else ''}, scheduling {self.scheduling}")
 
     # Parameters ---------------------------------------------------------------------------------------------
@@ -129,16 +130,16 @@ class SimNode(AtomicParametersNode):
         d("rate", 1000.0, ParameterDescriptor(description="sample rate (Hz); 2000 needs a single process",
                                               floating_point_range=fp_range(1.0, 5000.0)))
         d("v_min", prof.v_min, ParameterDescriptor(description="lowest voltage applied (V), inside the profile",
-                                                   floating_point_range=fp_range(-5.0, 150.0)))
+                                                   floating_point_range=fp_range(*V_SPAN)))
         d("v_max", prof.v_max, ParameterDescriptor(description="highest voltage applied (V), inside the profile",
-                                                   floating_point_range=fp_range(-5.0, 150.0)))
+                                                   floating_point_range=fp_range(*V_SPAN)))
         d("slew_max", prof.slew_max, ParameterDescriptor(description="amplifier slew limit (V/s)",
                                                          floating_point_range=fp_range(1e-3, 1e8)))
         d("command_timeout", 0.2, ParameterDescriptor(
             description="no command for this long (s) -> ramp to v_safe (realtime mode)",
             floating_point_range=fp_range(1e-3, 3600.0)))
         d("v_safe", prof.v_safe, ParameterDescriptor(description="voltage at start and after a timeout (V)",
-                                                     floating_point_range=fp_range(-5.0, 150.0)))
+                                                     floating_point_range=fp_range(*V_SPAN)))
         d("safe_ramp_rate", 100.0, ParameterDescriptor(description="ramp rate towards v_safe after a timeout (V/s)",
                                                        floating_point_range=fp_range(1e-3, 1e8)))
         d("frame_id", "stage", ParameterDescriptor(description="header.frame_id of /stage/state"))
@@ -300,7 +301,7 @@ class SimNode(AtomicParametersNode):
                 self._hold(missed)
             try:
                 self._tick()
-            except Exception as err:  # never let the sampler die silently  # noqa: BLE001
+            except Exception as err:  # noqa: BLE001 - never let the sampler die silently
                 if not self.context.ok():  # shutting down (SIGINT/SIGTERM): stop quietly
                     return
                 self.get_logger().error(f"sampling failed: {err}", throttle_duration_sec=1.0)

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 from .errors import SimError
 from .plant import PlantConfig
-from .profiles import get_profile
+from hyst_common.profiles import get_profile
 from .scenario import load_scenario
 
 __all__ = ["SimSettings", "plant_config"]

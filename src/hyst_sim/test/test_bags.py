@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.serialization import deserialize_message  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState
 
-from hyst_sim.bagio import RawBagWriter, bag_topics, read_raw  # noqa: E402
-from hyst_sim.errors import BagError  # noqa: E402
-from hyst_sim.play_node import PlayNode  # noqa: E402
-from hyst_sim.record_node import RecordNode  # noqa: E402
+from hyst_sim.bagio import RawBagWriter, bag_topics, read_raw
+from hyst_sim.errors import BagError
+from hyst_sim.play_node import PlayNode
+from hyst_sim.record_node import RecordNode
 
 pytestmark = pytest.mark.ros
 

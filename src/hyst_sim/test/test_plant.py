@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from hyst_model.core import pea_default
 from hyst_sim.errors import ConfigError, SimError
 from hyst_sim.plant import CLIP_NONFINITE, CLIP_RANGE, CLIP_SLEW, Plant, PlantConfig
-from hyst_sim.profiles import GMA, PEA
+from hyst_common.profiles import GMA, PEA
 
 DT = 1e-3
 BASE = PlantConfig(pea_default(), dt=DT)  # no sensor effects, no slew limit

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 
-from hyst_sim.plant import Plant  # noqa: E402
-from hyst_sim.scenario import scenario_dir  # noqa: E402
-from hyst_sim.sim_node import SimNode, plant_config  # noqa: E402
+from hyst_sim.plant import Plant
+from hyst_sim.scenario import scenario_dir
+from hyst_sim.sim_node import SimNode, plant_config
 
 pytestmark = pytest.mark.ros
 

@@ -124,7 +124,8 @@ def summary_text(st, title: str = "") -> str:
                  f"bias {_um(o.bias)}  max {_um(o.max_abs)}")
     lines.append("by segment:")
     for s in st.segments:
-        lines.append(f"  {s.label:<18} {s.t0:9.4g}–{s.t1:<9.4g} s  RMSE {_um(s.fit.rmse):>10}  fit {_pct(s.fit.fit_percent)}")
+        lines.append(f"  {s.label:<18} {s.t0:9.4g}–{s.t1:<9.4g} s  RMSE {_um(s.fit.rmse):>10}  "
+                     f"fit {_pct(s.fit.fit_percent)}")
     lines.append("by branch:")
     for k, f in st.branches.items():
         if f.n:

@@ -12,10 +12,15 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import DataError, EffectError, HystError, ParamsError
+from ..identify.methods import METHODS
+
+if TYPE_CHECKING:
+    from ..io.record import Record
 
 __all__ = ["register", "run", "add_data_options", "load_checked", "parse_split", "parse_config"]
 
@@ -72,7 +77,7 @@ def parse_split(train: str | None, val_fraction: float, how: str = "tail"):
     return val_fraction
 
 
-def load_checked(args) -> "Record":  # noqa: F821
+def load_checked(args) -> Record:
     """Read DATA per the data options and check it; returns a regular, finite record in SI units."""
     from ..io import load_record
     from ..io.record import Record
@@ -107,7 +112,7 @@ def register(subparsers) -> None:
     p.add_argument("data", help="rosbag2 directory, .mcap file, or CSV")
     p.add_argument("--model", default="mbw", help="base model: mbw (default), bw, pi")
     p.add_argument("--effects", default="", help="comma-separated effects composed onto the base, e.g. creep,delay")
-    p.add_argument("--method", choices=("fast", "epso", "lsq"), default="fast", help="identifier (default fast)")
+    p.add_argument("--method", choices=tuple(METHODS), default="fast", help="identifier (default fast)")
     p.add_argument("--seed", type=int, default=None, help="random seed (EPSO)")
     p.add_argument("--iterations", type=int, default=None, help="EPSO iterations (default 200)")
     p.add_argument("--train", metavar="T0:T1", help="train on T0 <= t < T1 (s), validate on t >= T1")

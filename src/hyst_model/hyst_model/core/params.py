@@ -7,12 +7,15 @@ Table 3.1 verbatim for the faithful EPSO.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
+from functools import lru_cache
 
 import numpy as np
 
+from hyst_common.profiles import get_profile
+
 from .mbw import PARAM_NAMES, mbw_rest_state, mbw_simulate
 
-__all__ = ["MBWParams", "BOUNDS", "TABLE31_BOUNDS", "THESIS_FIG37", "THESIS_FIG38", "THESIS_TABLE41",
+__all__ = ["MBWParams", "BOUNDS", "TABLE31_BOUNDS", "THESIS_FIG37", "THESIS_FIG38", "THESIS_TABLE41", "stage_model",
            "from_continuous", "pea_default"]
 
 #: Thesis Table 3.1: EPSO search bounds of the six shape parameters (used by ``method='epso'``).
@@ -142,6 +145,32 @@ def pea_default() -> MBWParams:
     150 V held at rest reads 30 µm (a 1 Hz 0–150 V sweep spans 30 µm too).
     """
     return _PEA_DEFAULT
+
+
+def stage_model(profile: str) -> MBWParams:
+    """Default stage model of an actuator profile (:mod:`hyst_common.profiles`), SI scaling included.
+
+    ``pea``: :func:`pea_default`. ``gma``: the thesis gives no complete identified GMA parameter set, so the
+    Table 4.1 loop shape on ``u_scale = 0.5 V`` (±5 V → ±10 model units) with ``y_scale`` such that ±5 V held
+    reads ± half the profile's stroke (±20 µm).
+
+    Raises
+    ------
+    hyst_common.errors.ConfigError
+        Unknown profile.
+    """
+    return _stage_model(get_profile(profile).name)
+
+
+@lru_cache(maxsize=None)
+def _stage_model(name: str) -> MBWParams:
+    pea = pea_default()
+    if name == "pea":
+        return pea
+    gma = get_profile("gma")
+    u_scale = gma.v_max / 10.0
+    y_full = float(mbw_rest_state(pea.vector, gma.v_max / u_scale))
+    return pea.replace(u_scale=u_scale, y_scale=(gma.stroke / 2.0) / y_full, offset=0.0)
 
 
 _PEA_DEFAULT = MBWParams(0.4029, 6.7438e-06, 0.0345, 0.0149, -0.0394, -0.0245, 0.9620, 0.9511,

@@ -5,7 +5,8 @@ Differentiating (3.21) with respect to θ = (ζ1, ζ2, ψ1, ψ2, α1, α2, δ1, 
 .. math::
 
     S_k = \\frac{\\partial f}{\\partial y_{k-1}} S_{k-1} + \\frac{\\partial f}{\\partial \\theta}, \\qquad
-    \\frac{\\partial f}{\\partial y_{k-1}} = \\delta_1 - (\\psi_1 + \\psi_2 v)|\\nu| - (\\alpha_1 + \\alpha_2 v)\\,\\nu\\,
+    \\frac{\\partial f}{\\partial y_{k-1}} = \\delta_1 - (\\psi_1 + \\psi_2 v)|\\nu|
+    - (\\alpha_1 + \\alpha_2 v)\\,\\nu\\,
     \\mathrm{sgn}(y_{k-1})
 
 with ∂ν/∂δ2 = −u_{k−1}. It runs alongside the recursion in the same loop (numba), so a full Jacobian costs about

@@ -123,6 +123,7 @@ def explain_unexplained(u: np.ndarray, e_val: np.ndarray, train: np.ndarray, rms
     else:
         kind = "outside the library"
         why = (f"only {share:.0%} of the held-out error is predicted by a function of input level and direction "
-               f"learnt on the training part: it depends on time, long history or a condition the record does not show (a load or stiffness "
-               f"change, temperature, stick-slip friction, ...) — something outside the effect library; hyst_model.effects.Effect lets you add it")
+               "learnt on the training part: it depends on time, long history or a condition the record does not "
+               "show (a load or stiffness change, temperature, stick-slip friction, ...) — something outside the "
+               "effect library; hyst_model.effects.Effect lets you add it")
     return Unexplained(float(rmse), float(ratio), float(share), kind, f"{head}; {why}")

@@ -7,5 +7,5 @@ from .base import KINDS, ComposedModel, Effect, Inner
 from .compose import EFFECTS, compose, effect_names, effects_data_config, register
 from .user_module import load_effect_module
 
-__all__ = ["EFFECTS", "Effect", "Inner", "ComposedModel", "KINDS", "compose", "effect_names", "effects_data_config", "register",
-           "load_effect_module"]
+__all__ = ["EFFECTS", "Effect", "Inner", "ComposedModel", "KINDS", "compose", "effect_names", "effects_data_config",
+           "register", "load_effect_module"]

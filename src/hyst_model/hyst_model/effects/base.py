@@ -250,7 +250,9 @@ class ComposedModel(Model):
         tb, tes = self.split(theta)
         base = self.base
         order = sorted(range(len(self.effects)), key=lambda i: self.effects[i].kind != "base")
-        f: Callable[[np.ndarray, np.ndarray], np.ndarray] = lambda tt, uu: base.simulate(tb, tt, uu)  # noqa: E731
+        def f(tt: np.ndarray, uu: np.ndarray) -> np.ndarray:
+            return base.simulate(tb, tt, uu)
+
         for i in order:
             f = _bind(self.effects[i], tes[i], Inner(f, base, tb))
         return f(np.asarray(t, dtype=np.float64), np.asarray(u, dtype=np.float64))

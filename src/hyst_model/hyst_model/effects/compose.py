@@ -92,7 +92,7 @@ def _load_builtins() -> None:
             m = importlib.import_module(f"{__package__}.{mod}")
         except ImportError:  # e.g. dynamics not written yet: the rest must keep working
             continue
-        except Exception:  # noqa: BLE001 - a broken sibling module must not take every effect down
+        except Exception:  # a broken sibling module must not take every effect down
             if mod in ("creep", "asymmetry", "delay", "drift", "saturation", "rate"):
                 raise
             continue

@@ -514,7 +514,7 @@ def choose_structure(base, t: np.ndarray, u: np.ndarray, y: np.ndarray, *,
     """
     from .compose import compose
     if fit is None:
-        from ..identify import fit as fit  # noqa: PLW0127
+        from ..identify import fit as fit
     results: dict[str, object] = {}
     rmse: dict[str, float] = {}
     for s in structures:

@@ -48,7 +48,7 @@ def load_effect_module(path: str | Path) -> list[str]:
     except SyntaxError as err:
         sys.modules.pop(modname, None)
         raise EffectError(f"effect module {p}: syntax error at line {err.lineno}: {err.msg}") from err
-    except Exception as err:  # noqa: BLE001 - anything a user file raises at import is "broken module"
+    except Exception as err:  # anything a user file raises at import is "broken module"
         sys.modules.pop(modname, None)
         raise EffectError(f"effect module {p}: import failed: {type(err).__name__}: {err}") from err
     classes = [obj for obj in vars(mod).values()
@@ -87,7 +87,7 @@ def _guarded(cls: type[Effect], path: Path) -> type[Effect]:
                 return orig(self, *args, **kwargs)
             except EffectError:
                 raise
-            except Exception as err:  # noqa: BLE001 - the user's code: report it, do not crash the run
+            except Exception as err:  # the user's code: report it, do not crash the run
                 raise EffectError(f"user effect {cls.name!r} ({path.name}) failed in {method_name}(): "
                                   f"{type(err).__name__}: {err}") from err
         guarded.__name__ = method_name
@@ -142,5 +142,5 @@ def _check(path: Path, cls: type[Effect]) -> None:
         float(score), str(text)
     except EffectError:
         raise
-    except Exception as err:  # noqa: BLE001
+    except Exception as err:
         raise EffectError(f"{where} fails its self-check: {type(err).__name__}: {err}") from err

@@ -6,27 +6,30 @@ convention (``fit`` returns self; ``theta_``, ``params_``, ``result_``). See :mo
 """
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ..errors import FitError
-from ..model import Model
-from .base import Estimator, model_label
-from .fast import FastFit
-from .lsq import LSQFit
+from .methods import METHODS, estimator_class
 from .result import FitResult, Split, block_mask, make_split, rmse
 
-__all__ = ["fit", "METHODS", "FastFit", "LSQFit", "EPSOFit", "Estimator", "FitResult", "Split", "make_split", "block_mask",
-           "rmse", "model_label"]
+if TYPE_CHECKING:
+    from ..model import Model
+
+__all__ = ["fit", "METHODS", "FastFit", "LSQFit", "EPSOFit", "Estimator", "FitResult", "Split", "make_split",
+           "block_mask", "rmse", "model_label"]
 
 
-def __getattr__(name):  # EPSO imports lazily (it is the slow path and pulls in the progress display)
-    if name == "EPSOFit":
-        from .epso import EPSOFit
-        return EPSOFit
+#: Names imported on first use (numba, scipy; EPSO pulls in the progress display), so that ``hyst --help`` and
+#: ``hyst fit --help`` can read :data:`METHODS` without them.
+_LAZY = {"FastFit": "fast", "LSQFit": "lsq", "EPSOFit": "epso", "Estimator": "base", "model_label": "base"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
     raise AttributeError(name)
-
-
-METHODS = ("fast", "epso", "lsq")
 
 
 def fit(model: Model, t, u, y, method: str = "fast", seed: int | None = None, split=0.25,
@@ -37,7 +40,8 @@ def fit(model: Model, t, u, y, method: str = "fast", seed: int | None = None, sp
     ----------
     model : Model
         Model to fit (base or composed).
-    method : {'fast', 'epso', 'lsq'}
+    method : str
+        A name in :data:`~hyst_model.identify.methods.METHODS`:
         ``fast`` (default): equation-error start + output-error least squares; ``epso``: the thesis's extended
         PSO (3.22)–(3.27); ``lsq``: bounded least squares from the model defaults (the thesis's LSQM baseline).
     seed : int, optional
@@ -49,13 +53,9 @@ def fit(model: Model, t, u, y, method: str = "fast", seed: int | None = None, sp
     **options
         Passed to the estimator (e.g. ``n_starts`` for fast, ``iterations``/``particles`` for EPSO).
     """
-    if method == "fast":
-        est = FastFit(model, split=split, progress=progress, **options)
-    elif method == "lsq":
-        est = LSQFit(model, split=split, progress=progress, **options)
-    elif method == "epso":
-        from .epso import EPSOFit
-        est = EPSOFit(model, seed=seed, split=split, progress=progress, **options)
-    else:
+    if method not in METHODS:
         raise FitError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if METHODS[method].seeded:
+        options["seed"] = seed
+    est = estimator_class(method)(model, split=split, progress=progress, **options)
     return est.fit(t, u, y).result_

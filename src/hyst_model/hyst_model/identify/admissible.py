@@ -49,7 +49,8 @@ def check_admissible(model, theta, rel: float = 1e-6) -> Admissibility:
     width = np.where(np.isfinite(hi - lo), hi - lo, np.abs(theta) + 1.0)
     at = [f"{n} = {v:.6g} (on its {'lower' if v - lo[i] <= rel * width[i] else 'upper'} bound)"
           for i, (n, v) in enumerate(zip(names, theta))
-          if (np.isfinite(lo[i]) and v - lo[i] <= rel * width[i]) or (np.isfinite(hi[i]) and hi[i] - v <= rel * width[i])]
+          if (np.isfinite(lo[i]) and v - lo[i] <= rel * width[i])
+          or (np.isfinite(hi[i]) and hi[i] - v <= rel * width[i])]
     vals = dict(zip(names, theta))
     pairs = [(a, p) for a, p in (("alpha1", "psi1"), ("alpha2", "psi2")) if a in vals and p in vals]
     if not pairs:

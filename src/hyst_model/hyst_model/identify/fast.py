@@ -7,13 +7,13 @@ Given the measured output, MBW (3.21) is *linear* in (ζ1, ζ2, ψ1, ψ2, α1, �
 .. math::  y_k - \\delta_1 y_{k-1} = [\\nu_k,\\ v_k\\nu_k,\\ -|\\nu_k| y_{k-1},\\ -v_k|\\nu_k| y_{k-1},\\
            -\\nu_k|y_{k-1}|,\\ -v_k\\nu_k|y_{k-1}|]\\,(\\zeta_1, \\zeta_2, \\psi_1, \\psi_2, \\alpha_1, \\alpha_2)^T
 
-and δ1 enters linearly as well, so a grid over δ2 and a few offset guesses costs one small least-squares solve each (equation error, on a
-zero-phase low-passed y because differencing amplifies sensor noise). Every grid candidate is then simulated in
-free run at once (:func:`hyst_model.core.mbw.mbw_simulate_batch`) and the best few distinct ones start an
-output-error fit of the free-run residual within the parameter bounds by a compact bounded Levenberg-Marquardt on
-the p × p normal equations (:mod:`.lm`), with the exact Jacobian of forward sensitivities for MBW/BW and forward
-differences for any other model. (:func:`scipy.optimize.least_squares` factorises the n × p Jacobian every
-iteration; on 60k-sample records it took 40–135 s per composed-model refit against a few seconds here.)
+and δ1 enters linearly as well, so a grid over δ2 and a few offset guesses costs one small least-squares solve each
+(equation error, on a zero-phase low-passed y because differencing amplifies sensor noise). Every grid candidate is
+then simulated in free run at once (:func:`hyst_model.core.mbw.mbw_simulate_batch`) and the best few distinct ones
+start an output-error fit of the free-run residual within the parameter bounds by a compact bounded
+Levenberg-Marquardt on the p × p normal equations (:mod:`.lm`), with the exact Jacobian of forward sensitivities for
+MBW/BW and forward differences for any other model. (:func:`scipy.optimize.least_squares` factorises the n × p
+Jacobian every iteration; on 60k-sample records it took 40–135 s per composed-model refit against a few seconds here.)
 δ1, δ2 and the offset are fitted too; the LSQM baseline (:mod:`.lsq`) keeps scipy's solver.
 
 Any model works: a composed model (``.base`` + effects) first fits its base alone (equation-error start + exact

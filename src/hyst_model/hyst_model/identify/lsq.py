@@ -40,7 +40,8 @@ class LSQFit(Estimator):
         x0 = problem.clip(self.model.theta0 if self.theta0 is None else self.theta0)
         jac = problem.jac if problem.has_jac else "2-point"
         if not problem.has_jac and problem.inactive:  # skip the columns the output does not depend on
-            jac = lambda th: problem.fd_residuals_jac(th)[1]  # noqa: E731
+            def jac(th):
+                return problem.fd_residuals_jac(th)[1]
         sol = least_squares(problem.residuals, x0, jac=jac, bounds=(problem.lower, problem.upper), method="trf",
                             x_scale="jac", max_nfev=self.max_nfev)
         c = problem.cost(sol.x)

@@ -179,7 +179,7 @@ def salvage_joint_states(path: str | Path, topic: str = STATE_TOPIC) -> JointSta
                     pos.append(np.asarray(msg.position, dtype=np.float64))
                     vel.append(np.asarray(msg.velocity, dtype=np.float64))
                     eff.append(np.asarray(msg.effort, dtype=np.float64))
-        except Exception:  # the damaged tail: keep everything before it  # noqa: S110
+        except Exception:  # noqa: BLE001 - the damaged tail: keep everything before it
             pass
     if not stamps:
         raise DataError(f"{path}: nothing on {topic!r} could be salvaged")

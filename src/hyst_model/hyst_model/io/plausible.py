@@ -4,21 +4,23 @@ A displacement in µm read as metres fits without complaint (a 4 041 482 nm RMSE
 give a 2 Hz record. Nothing here refuses data — the rig may be unusual — but each implausible figure is named
 with the likely cause and the option that fixes it, on stderr, before the fit.
 
-The limits are the rig's two stages (the same figures as ``hyst_sim.profiles``, which the driver and the sim
-share; this package sits below them, so they are restated here): PEA 0…150 V, 30 µm; GMA ±5 V, ±20 µm.
+The limits are the rig's two stages (:mod:`hyst_common.profiles`, which the driver, the sim and the controller
+share): PEA 0…150 V, 30 µm; GMA ±5 V, ±20 µm.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from hyst_common.profiles import PROFILES, V_SPAN
+
 __all__ = ["plausibility", "STROKE_MAX", "V_RANGE", "RATE_RANGE", "STROKE_FACTOR"]
 
 #: Largest stroke of the rig's stages (m): GMA ±20 µm.
-STROKE_MAX = 40e-6
+STROKE_MAX = max(p.stroke for p in PROFILES.values())
 #: Displacement spans beyond this many strokes are flagged (µm as m is 10⁶, mm as m 10³).
 STROKE_FACTOR = 100.0
 #: Widest amplifier range of the rig's stages (V): GMA −5 V … PEA 150 V.
-V_RANGE = (-5.0, 150.0)
+V_RANGE = V_SPAN
 #: Plausible sample rates (Hz) for a positioning record.
 RATE_RANGE = (10.0, 100e3)
 
@@ -41,7 +43,8 @@ def plausibility(t: np.ndarray, u: np.ndarray, y: np.ndarray, input_unit: str = 
         if d.size:
             fs = 1.0 / float(np.median(d))
             if not RATE_RANGE[0] <= fs <= RATE_RANGE[1]:
-                out.append(f"the sample rate is {fs:.4g} Hz, outside {RATE_RANGE[0]:g} Hz – {RATE_RANGE[1] / 1e3:g} kHz: "
+                out.append(f"the sample rate is {fs:.4g} Hz, outside {RATE_RANGE[0]:g} Hz – "
+                           f"{RATE_RANGE[1] / 1e3:g} kHz: "
                            "are the times in ms or µs read as seconds? give the unit, e.g. --units ms,V,um")
     span = float(np.ptp(y)) if y.size else 0.0
     if span > STROKE_FACTOR * STROKE_MAX:

@@ -5,9 +5,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyst_model.core import MBWParams
+from hyst_common.profiles import GMA, PEA
+from hyst_model.core import MBWParams, stage_model
 
-from ..profiles import GMA, PEA, _default_model
 from .excitation import EXCITATIONS, excitation
 from .forms import FORMS, LIBRARY_NAME, Ctx, draw
 
@@ -47,7 +47,7 @@ class Case:
 
 
 def _mbw_truth(profile: str, rng: np.random.Generator) -> MBWParams:
-    p = _default_model(profile)
+    p = stage_model(profile)
     return p.replace(zeta1=p.zeta1 * rng.uniform(0.85, 1.15), zeta2=p.zeta2 * rng.uniform(0.7, 1.3),
                      y_scale=p.y_scale * rng.uniform(0.8, 1.2),
                      offset=p.offset + rng.uniform(-2e-6, 2e-6))

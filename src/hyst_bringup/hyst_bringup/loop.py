@@ -1,4 +1,4 @@
-"""In-process closed loop (no ROS): a controller from this package against the simulated plant.
+"""In-process closed loop (no ROS): a controller from hyst_control against the simulated plant (hyst_sim).
 
 Used by ``hyst track``, the tracking tables (bench/bench_tracking.py) and the tests. The stage is first held at
 the reference's starting point for ``settle`` seconds under the same controller (as an experiment starts from a
@@ -17,71 +17,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyst_model.core import MBWParams, pea_default
+from hyst_control.base import BaseController
+from hyst_control.controllers import make_controller
+from hyst_control.errors import ConfigError, LoopError
+from hyst_control.reference import Reference, parse_reference
+from hyst_model.core import pea_default
+from hyst_sim.plant import Plant, PlantConfig
 
-from .base import BaseController
-from .compensation import Compensation, wrap
-from .dmrac import DMRAC, DMRACGains
-from .dppc import DPPC, DPPCGains
-from .errors import ConfigError, ControlError, LoopError
-from .limits import PEA_LIMITS, CommandLimits
-from .pid import PID, OpenLoop, PIDGains
-from .reference import Reference, parse_reference
-
-__all__ = ["ALGORITHMS", "LoopResult", "make_controller", "mismatched", "run_closed_loop", "default_plant",
-           "warm_up",
-           "SimPlant", "parse_schedule"]
-
-ALGORITHMS = ("dppc", "dmrac", "pid", "open_loop")
-
-
-def make_controller(algorithm: str, model: MBWParams, dt: float, limits: CommandLimits | None = None,
-                    gains=None, initial="model", compensation: Compensation | None = None):
-    """Build a controller by name (``dppc``, ``dmrac``, ``pid``, ``open_loop``).
-
-    With a :class:`~hyst_control.compensation.Compensation` that uses any effect, the law is wrapped in
-    :class:`~hyst_control.compensation.Compensated` (the identified effects inverted around it).
-    """
-    limits = limits or PEA_LIMITS
-    if algorithm == "dppc":
-        c: BaseController = DPPC(model, dt, gains or DPPCGains(), limits)
-    elif algorithm == "dmrac":
-        c = DMRAC(model, dt, gains or DMRACGains(), initial, limits)
-    elif algorithm == "pid":
-        c = PID(dt, gains or PIDGains(), limits)
-    elif algorithm == "open_loop":
-        c = OpenLoop(model, dt, limits)
-    else:
-        raise ConfigError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(ALGORITHMS)}")
-    return wrap(c, compensation)
-
-
-def parse_schedule(text: str) -> list[tuple[str, float]]:
-    """``'dppc:3,pid:2'`` → ``[('dppc', 3.0), ('pid', 2.0)]``; raises ControlError with the accepted form."""
-    out = []
-    for item in filter(None, (x.strip() for x in text.split(","))):
-        alg, _, sec = item.partition(":")
-        try:
-            dur = float(sec)
-        except ValueError:
-            raise ControlError(f"schedule entry {item!r}: use ALGORITHM:SECONDS, e.g. dppc:3") from None
-        if alg not in ALGORITHMS or not dur > 0:
-            raise ControlError(f"schedule entry {item!r}: algorithm in {', '.join(ALGORITHMS)}, seconds > 0")
-        out.append((alg, dur))
-    return out
-
-
-def mismatched(model: MBWParams, fraction: float) -> MBWParams:
-    """The controller's view of a stage with a relative model error ``fraction``.
-
-    ζ1, ζ2 are scaled by (1 + F) (gain over-estimated) and ψ1, ψ2, α1, α2 by (1 − F) (hysteresis
-    under-estimated); the ratio α_i/ψ_i and hence Remark 4.1 is unchanged.
-    """
-    if not -0.9 < fraction < 0.9:
-        raise ConfigError("mismatch must lie in (-0.9, 0.9)")
-    a, b = 1.0 + fraction, 1.0 - fraction
-    return model.replace(zeta1=model.zeta1 * a, zeta2=model.zeta2 * a, psi1=model.psi1 * b,
-                         psi2=model.psi2 * b, alpha1=model.alpha1 * b, alpha2=model.alpha2 * b)
+__all__ = ["LoopResult", "run_closed_loop", "default_plant", "warm_up", "SimPlant"]
 
 
 class SimPlant:
@@ -105,8 +48,6 @@ class SimPlant:
 def default_plant(rate: float = 2000.0, seed: int = 0, **strengths: float) -> SimPlant:
     """The embedded default stage (:meth:`hyst_sim.plant.Plant.default`: pea_default, 0–150 V, 2 nm noise and
     2 nm quantisation) at ``rate``, with optional effect strengths (``creep=0.02``, ``delay=1``, ...)."""
-    from hyst_sim.plant import Plant, PlantConfig  # noqa: PLC0415 - sibling package, numerical core
-
     if strengths:
         return SimPlant(Plant(PlantConfig.for_profile("pea", rate, seed=seed).with_strengths(**strengths)))
     return SimPlant(Plant.default(rate=rate, seed=seed))

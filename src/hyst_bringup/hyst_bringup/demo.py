@@ -19,8 +19,11 @@ import sys
 import time
 from pathlib import Path
 
-from .errors import LoopError
-from .loop import parse_schedule, warm_up
+from hyst_control.controllers import parse_schedule
+from hyst_control.errors import LoopError
+from hyst_sim.bagio import default_bag_path
+
+from .loop import warm_up
 
 __all__ = ["register", "run", "find_executable"]
 
@@ -31,7 +34,7 @@ def find_executable(name: str, pkg: str) -> str:
     if here.exists():
         return str(here)
     try:
-        from ament_index_python.packages import get_package_prefix  # noqa: PLC0415
+        from ament_index_python.packages import get_package_prefix
         cand = Path(get_package_prefix(pkg)) / "lib" / pkg / name
         if cand.exists():
             return str(cand)
@@ -70,8 +73,6 @@ def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hyst_sim.bagio import default_bag_path  # noqa: PLC0415
-
     schedule = parse_schedule(args.schedule)
     if not schedule:
         raise LoopError("empty schedule")
@@ -96,9 +97,9 @@ def run(args: argparse.Namespace) -> int:
                 "-p", "hyst_controller:watchdog_periods:=1000000"]  # lockstep may pause; the stage is not lost
     rec = subprocess.Popen([find_executable("hyst_bag_record", "hyst_sim"), "-o", str(bag)], env=env,
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    loop = subprocess.Popen([find_executable("hyst_loop_node", "hyst_control"), "--schedule", args.schedule,
-                             "--summary-json", "--wait-subscribers", "2", *ros], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    loop = subprocess.Popen([find_executable("hyst_loop_node", "hyst_bringup"), "--schedule", args.schedule,
+                             "--summary-json", "--wait-subscribers", "2", *ros], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     print(f"hyst demo: {', '.join(f'{a} {d:g} s' for a, d in schedule)} at {args.rate:g} Hz on a "
           f"{args.frequency:g} Hz sine; recording {bag}", flush=True)
     try:

@@ -36,7 +36,7 @@ def test_demo_refuses_a_bad_schedule_with_one_line(tmp_path):
 
 def test_warm_up_runs_each_algorithm_and_rejects_unknown_ones():
     from hyst_control.errors import ControlError
-    from hyst_control.loop import warm_up
+    from hyst_bringup.loop import warm_up
     assert warm_up(["dppc", "dmrac", "pid", "open_loop"], 2000.0) > 0.0
     with pytest.raises(ControlError):
         warm_up(["wobble"], 2000.0)

@@ -27,10 +27,11 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
-from .controller_node import ControllerNode
-from .errors import ControlError
-from .loop import parse_schedule
-from .reference_node import ReferenceNode
+from hyst_control.controller_node import ControllerNode
+from hyst_control.controllers import parse_schedule
+from hyst_control.errors import ControlError
+from hyst_control.reference_node import ReferenceNode
+from hyst_sim.sim_node import SimNode
 
 __all__ = ["main"]
 
@@ -59,10 +60,9 @@ def main(args=None) -> int:
     except ControlError as err:
         print(f"hyst_loop_node: {err}", file=sys.stderr)
         return 2
-    from hyst_sim.sim_node import SimNode  # noqa: PLC0415 - the sim is a sibling package
 
     rclpy.init(args=args)
-    nodes = []
+    nodes: list = []
     ctl = None
     t_start = None
     try:

@@ -18,9 +18,22 @@ import json
 import math
 import sys
 
-from .errors import ConfigError
-from .loop import ALGORITHMS, default_plant, make_controller, mismatched, run_closed_loop
-from .reference import parse_reference
+from pathlib import Path
+
+from hyst_control.compensation import Compensation, from_params
+from hyst_control.controllers import ALGORITHMS, CONTROLLERS, make_controller, mismatched
+from hyst_control.errors import ConfigError
+from hyst_control.reference import parse_reference
+from hyst_control.stability import Resonance, guard, identified_resonance
+from hyst_model.core import pea_default
+from hyst_model.errors import HystError
+from hyst_model.io.params_file import read_params
+from hyst_sim.errors import SimError
+from hyst_sim.plant import Plant, PlantConfig
+from hyst_sim.scenario import scenario_dir
+from hyst_sim.truth_effects import Dynamics
+
+from .loop import SimPlant, default_plant, run_closed_loop
 
 __all__ = ["register", "run"]
 
@@ -87,9 +100,6 @@ def _gains(args: argparse.Namespace, classes: dict):
 
 def _read_params(path: str):
     """The params file as a :class:`hyst_model.io.params_file.ParamsSpec` (read once per run)."""
-    from hyst_model.errors import HystError  # noqa: PLC0415
-    from hyst_model.io.params_file import read_params  # noqa: PLC0415
-
     try:
         return read_params(path)
     except HystError as err:
@@ -98,8 +108,6 @@ def _read_params(path: str):
 
 def _params_model(spec, path: str, rate: float):
     """Base MBW and compensation of a params file; its ``dt`` must match the loop rate."""
-    from .compensation import Compensation, from_params  # noqa: PLC0415
-
     mdt = spec.config.get("dt")
     if mdt and abs(float(mdt) * rate - 1.0) > 1e-6:
         raise ConfigError(f"{path} was identified at dt = {float(mdt):g} s: run with --rate {1.0 / float(mdt):g} "
@@ -110,14 +118,6 @@ def _params_model(spec, path: str, rate: float):
 
 def _plant(scenario: str, rate: float, seed: int):
     """The embedded stage with a hidden-effect scenario (a file, or a name shipped with hyst_sim)."""
-    from pathlib import Path  # noqa: PLC0415
-
-    from hyst_sim.errors import SimError  # noqa: PLC0415
-    from hyst_sim.plant import Plant, PlantConfig  # noqa: PLC0415
-    from hyst_sim.scenario import scenario_dir  # noqa: PLC0415
-
-    from .loop import SimPlant  # noqa: PLC0415
-
     path = Path(scenario)
     if not path.exists():
         named = scenario_dir() / (scenario if scenario.endswith(".yaml") else scenario + ".yaml")
@@ -145,23 +145,12 @@ def _resonance(text: str) -> tuple[float, float]:
 
 def _resonant(rate: float, seed: int, fn: float, zeta: float):
     """The default simulated stage with a ZOH-exact resonance after the hysteresis (hyst_sim's dynamics effect)."""
-    from hyst_sim.plant import Plant, PlantConfig  # noqa: PLC0415 - sibling package, numerical core
-    from hyst_sim.truth_effects import Dynamics  # noqa: PLC0415
-
-    from .loop import SimPlant  # noqa: PLC0415
-
     cfg = PlantConfig.for_profile("pea", rate, seed=seed)
     return SimPlant(Plant(cfg.replace(effects=cfg.effects.with_effects(dynamics=Dynamics(strength=fn,
                                                                                           damping=zeta)))))
 
 
 def run(args: argparse.Namespace) -> int:
-    from hyst_model.core import pea_default  # noqa: PLC0415
-    from .dmrac import DMRACGains  # noqa: PLC0415
-    from .dppc import DPPCGains  # noqa: PLC0415
-    from .pid import PIDGains  # noqa: PLC0415
-    from .stability import Resonance, guard, identified_resonance  # noqa: PLC0415
-
     if not (math.isfinite(args.seconds) and 0 < args.seconds <= 600):
         raise ConfigError("--seconds must be in (0, 600]")
     spec = _read_params(args.params) if args.params else None
@@ -179,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         model = pea_default()
     model = mismatched(model, args.mismatch) if args.mismatch else model
-    gains = _gains(args, {"dppc": DPPCGains, "dmrac": DMRACGains, "pid": PIDGains})
+    gains = _gains(args, {name: law.gains for name, law in CONTROLLERS.items() if law.gains is not None})
     plant = _plant(args.scenario, args.rate, args.seed) if args.scenario else default_plant(args.rate, args.seed)
     stab = None
     resonance = None

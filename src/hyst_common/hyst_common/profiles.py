@@ -1,7 +1,9 @@
 """Actuator profiles: the amplifier's voltage range and the stage's nominal stroke and sensor.
 
-A profile is what the rig's hardware fixes (``docs/ARCHITECTURE.md``, shared parameter ``profile``); the sim and
-the driver both import it, so a command is clipped to the same range on either side.
+A profile is what the rig's hardware fixes (``docs/ARCHITECTURE.md``, shared parameter ``profile``); the sim, the
+driver and the controller all import it from here, so a command is limited to the same range everywhere (by the
+one limiter, :mod:`hyst_common.limits`). The default stage *model* of a profile is a model, not a hardware fact:
+:func:`hyst_model.core.stage_model`.
 
 ==========  ==============  ===========  ==============  ================================================
 profile     amplifier       stroke       sensor          default stage model
@@ -16,19 +18,13 @@ thesis's own sine amplitude) and ``y_scale`` chosen so that ±5 V held reads ±2
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from functools import lru_cache
-
-import numpy as np
-from numba import njit
 
 from .errors import ConfigError
+from .limits import CommandLimits
 
-__all__ = ["Profile", "PEA", "GMA", "PROFILES", "get_profile", "clip_command", "clip_kernel",
-           "CLIP_RANGE", "CLIP_SLEW", "CLIP_NONFINITE"]
-
-#: Flag bits returned by :func:`clip_command`.
-CLIP_RANGE, CLIP_SLEW, CLIP_NONFINITE = 1, 2, 4
+__all__ = ["Profile", "PEA", "GMA", "PROFILES", "get_profile", "V_SPAN", "PEA_LIMITS", "GMA_LIMITS"]
 
 
 @dataclass(frozen=True)
@@ -72,11 +68,13 @@ class Profile:
 
     def contains(self, v: float) -> bool:
         """True when ``v`` (V) is a finite voltage inside the amplifier range."""
-        return bool(np.isfinite(v) and self.v_min <= v <= self.v_max)
+        return bool(math.isfinite(v) and self.v_min <= v <= self.v_max)
 
-    def model(self):
-        """Default stage model (:class:`hyst_model.core.MBWParams`) for this profile, SI scaling included."""
-        return _default_model(self.name)
+    def limits(self, **kw) -> CommandLimits:
+        """The profile's range, slew limit and safe voltage as :class:`~hyst_common.limits.CommandLimits` (``kw``
+        overrides fields, e.g. ``v_max``)."""
+        return CommandLimits(**{"v_min": self.v_min, "v_max": self.v_max, "slew_max": self.slew_max,
+                         "v_safe": self.v_safe, **kw})
 
 
 #: Piezoelectric stage of thesis ch. 4: 0–150 V amplifier (6 kHz bandwidth), 30 µm travel, 2 nm sensor.
@@ -87,6 +85,8 @@ GMA = Profile("gma", -5.0, 5.0, 40e-6, 2e-9, 2e-9, 0.0, 1.0e4,
               "giant-magnetostrictive actuator, driver input +-5 V, +-20 um")
 
 PROFILES: dict[str, Profile] = {"pea": PEA, "gma": GMA}
+#: Lowest and highest voltage of any profile (V): the static range of the nodes' voltage parameters (-5, 150).
+V_SPAN = (min(p.v_min for p in PROFILES.values()), max(p.v_max for p in PROFILES.values()))
 
 
 def get_profile(name: str) -> Profile:
@@ -103,77 +103,7 @@ def get_profile(name: str) -> Profile:
         raise ConfigError(f"unknown profile {name!r}; choose one of {', '.join(PROFILES)}") from None
 
 
-def clip_command(v: float, v_min: float, v_max: float, v_prev: float, max_step: float) -> tuple[float, int]:
-    """Clip one command to a range and a per-sample slew step, the way the amplifier sees it.
-
-    The simulated plant's compiled loop calls the same function (:func:`clip_kernel`), so the sim and a driver
-    that imports this clip identically.
-
-    Parameters
-    ----------
-    v : float
-        Commanded voltage (V); NaN/inf keep the previous output.
-    v_min, v_max : float
-        Allowed range (V), inside the profile.
-    v_prev : float
-        Voltage applied one sample earlier (V).
-    max_step : float
-        Largest change per sample (V), ``slew_max * dt``; ``inf`` disables the slew limit.
-
-    Returns
-    -------
-    v_applied : float
-    flags : int
-        Bit 0 (:data:`CLIP_RANGE`) range clipped, bit 1 (:data:`CLIP_SLEW`) slew limited, bit 2
-        (:data:`CLIP_NONFINITE`) non-finite command replaced by the previous value.
-    """
-    va, fl = clip_kernel(float(v), float(v_min), float(v_max), float(v_prev), float(max_step))
-    return float(va), int(fl)
-
-
-@njit(cache=True)
-def clip_kernel(v: float, v_min: float, v_max: float, v_prev: float, max_step: float):
-    """Compiled body of :func:`clip_command` (float arguments only).
-
-    Order: range, then slew relative to ``v_prev``, then the range again, so that the output is inside
-    ``[v_min, v_max]`` even when ``v_prev`` is not (e.g. right after the range was narrowed).
-    """
-    flags = 0
-    if not np.isfinite(v):
-        v = v_prev
-        flags = 4
-    else:
-        if v < v_min:
-            v = v_min
-            flags |= 1
-        elif v > v_max:
-            v = v_max
-            flags |= 1
-        dv = v - v_prev
-        if dv > max_step:
-            v = v_prev + max_step
-            flags |= 2
-        elif dv < -max_step:
-            v = v_prev - max_step
-            flags |= 2
-    if v < v_min:
-        v = v_min
-        flags |= 1
-    elif v > v_max:
-        v = v_max
-        flags |= 1
-    return v, flags
-
-
-@lru_cache(maxsize=None)
-def _default_model(name: str):
-    from hyst_model.core import mbw_rest_state, pea_default  # late: keep the profile table importable alone
-
-    pea = pea_default()
-    if name == "pea":
-        return pea
-    if name == "gma":
-        u_scale = GMA.v_max / 10.0
-        y_full = float(mbw_rest_state(pea.vector, GMA.v_max / u_scale))
-        return pea.replace(u_scale=u_scale, y_scale=(GMA.stroke / 2.0) / y_full, offset=0.0)
-    raise ConfigError(f"no default model for profile {name!r}")
+#: Command limits of the PEA amplifier 0–150 V (thesis 4.3.1), slew 1e5 V/s, for the controllers.
+PEA_LIMITS = PEA.limits()
+#: Command limits of the GMA driver input ±5 V (thesis Table 5.1), slew 1e4 V/s.
+GMA_LIMITS = GMA.limits()
