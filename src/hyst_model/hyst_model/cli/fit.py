@@ -33,8 +33,9 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gaps", choices=("auto", "bridge", "longest", "refuse", "error"), default="auto",
                    help="irregular time stamps: auto (default) collapses repeated stamps (lockstep runs), bridges "
                         "gaps of up to 10 missed periods (input held, as the DAC holds it) and keeps the regular "
-                        "segment between longer ones whose input varies most; bridge: the same but a longer gap is an error; "
-                        "longest: keep the longest regular segment; refuse (= error): stop on any irregularity")
+                        "segment between longer ones whose input varies most; bridge: the same but a longer gap is "
+                        "an error; longest: keep the longest regular segment; refuse (= error): stop on any "
+                        "irregularity")
     p.add_argument("--salvage", action="store_true",
                    help="read an MCAP bag whose recorder was killed (no footer) up to its damaged end")
     p.add_argument("--resample", type=float, metavar="HZ",
