@@ -12,8 +12,9 @@ seconds next to a 1 kHz publisher, so give ``TOPIC:pkg/msg/Type`` to start at on
 (keep-all history) and switch to best effort when a best-effort publisher appears; callbacks only queue the bytes
 and a writer thread writes them, so a slow disk or compression never makes the subscription drop samples.
 SIGINT/SIGTERM or ``--duration`` stop recording and finalise the bag (metadata and MCAP summary). After a signal
-the recorder first takes what the middleware has already delivered (until 0.5 s pass without a message; a second
-signal stops that at once), so a run that ends faster than a loaded machine records keeps its tail; further
+the recorder first takes what the middleware has already delivered (until 0.3 s pass without a message, at most
+3 s: a live stream is recorded up to 3 s past the signal; a second signal stops that at once), so a run that
+ends faster than a loaded machine records keeps its tail; further
 signals during finalisation are reported and ignored, so the bag is always readable. An existing output directory is
 refused. To never miss the start of a lockstep run, start the recorder first and give the sim
 ``-p wait_for_subscribers:=2`` (it then waits for the recorder and the controller/excitation before sample 0);
@@ -220,10 +221,11 @@ def main(args=None) -> int:
     return 1 if lost else 0
 
 
-def _drain(node: RecordNode, stop: threading.Event, quiet: float = 0.5, longest: float = 30.0) -> None:
+def _drain(node: RecordNode, stop: threading.Event, quiet: float = 0.3, longest: float = 3.0) -> None:
     """After the stop signal: take what the middleware already delivered, until ``quiet`` s pass without a
-    message (or ``longest`` s, or a second signal). A lockstep run ends faster than a recorder on a loaded machine
-    writes: stopping at once lost the last 3100 of 4000 samples of a demo bag."""
+    message (or ``longest`` s — a live stream never goes quiet —, or a second signal). A lockstep run ends faster
+    than a recorder on a loaded machine writes: stopping at once lost the last 3100 of 4000 samples of a demo
+    bag."""
     stop.clear()  # a second signal ends the drain
     print("hyst_bag_record: stopping: taking the messages already delivered (Ctrl-C again to stop at once)",
           file=sys.stderr, flush=True)
