@@ -20,6 +20,7 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from hyst_bringup.loop import SimPlant, run_closed_loop
@@ -83,8 +84,12 @@ def test_topics_match_in_process_and_switching_is_bumpless(loop_processes):
         states[t] = m.position[0]
         latest[0] = max(latest[0], t)
 
-    node.create_subscription(JointState, "/stage/state", on_state, 1000)
-    node.create_subscription(JointState, "/stage/command", lambda m: cmds.__setitem__(_stamp(m), m.effort[0]), 1000)
+    # keep-all: while this node is busy (not spinning) the lockstep loop waits for it instead of its history
+    # overwriting the oldest samples (a keep-last 1000 reader lost 6.4 s of the run while it waited for services)
+    keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    node.create_subscription(JointState, "/stage/state", on_state, keep_all)
+    node.create_subscription(JointState, "/stage/command", lambda m: cmds.__setitem__(_stamp(m), m.effort[0]),
+                             keep_all)
     client = AsyncParameterClient(node, "hyst_controller")
     try:
         # The lockstep sim repeats its first sample until a command answers it: once this node hears it, it is
@@ -97,7 +102,10 @@ def test_topics_match_in_process_and_switching_is_bumpless(loop_processes):
             rclpy.spin_once(node, timeout_sec=0.05)
         assert states, "the lockstep sim never announced its first sample"
         loop_processes("controller")
-        assert client.wait_for_services(timeout_sec=30.0), "controller parameter services never appeared"
+        t_end = time.monotonic() + 60.0
+        while not client.services_are_ready() and time.monotonic() < t_end:
+            rclpy.spin_once(node, timeout_sec=0.05)  # spin meanwhile: the loop is running
+        assert client.services_are_ready(), "controller parameter services never appeared"
         pending = list(SWITCHES)
         deadline = time.monotonic() + 150.0
         futures = []

@@ -21,7 +21,7 @@ beside the loop, the kernel's pty (the emulator's link) stalled for 0.1–2.2 s 
 ran SCHED_FIFO and used < 20 % CPU: the pty is flushed by a kernel worker at normal priority, so the driver's
 writes timed out and it lost 818 of 5000 samples in 15 s. A real rig's serial adapter has its own path. The
 driver reports such stalls on ``/diagnostics`` (timeouts, disconnects, lost samples, and the command latency:
-a p99 above one period means commands missed their samples), so a run whose link stalled or whose commands came
+a median above one period means most commands missed their samples), so a run whose link stalled or whose commands came
 late within the judged window is not judged for tracking; instead the test asserts the stall was reported
 and the driver recovered (its stream resumed). With no judgeable run at all (a machine this busy) the tracking
 comparison is skipped with the figures — never passed blindly.
@@ -121,7 +121,7 @@ class Recorder:
             if st.name == "hyst_driver: stage link":
                 kv = {k.key: k.value for k in st.values}
                 counts = {k: int(kv.get(k, 0)) for k in _STALL_KEYS}
-                self.link.append((time.monotonic(), counts, float(kv.get("latency_ms.p99", "nan"))))
+                self.link.append((time.monotonic(), counts, float(kv.get("latency_ms.p50", "nan"))))
 
     def link_stalls(self, since: float) -> dict:
         """Growth of the driver's stall counters from the last report before ``since`` (monotonic s) to the
@@ -131,11 +131,12 @@ class Recorder:
         before = [c for t, c, _ in self.link if t <= since] or [dict.fromkeys(_STALL_KEYS, 0)]
         end = self.link[-1][1]
         grown = {k: end[k] - before[-1][k] for k in _STALL_KEYS if end[k] > before[-1][k]}
-        # a command later than one period misses its sample: the loop then runs with two samples of delay,
-        # which the laws are not tuned for (the driver's p99 covers its last 2000 commands)
-        p99 = max((lat for t, _, lat in self.link if t > since + 2.0), default=float("nan"))
-        if p99 > 1e3 / RATE:
-            grown["late_commands_p99_ms"] = round(p99, 2)
+        # a command later than one period misses its sample: when most do (the driver's median over its last
+        # 2000 commands), the loop runs with two samples of delay, which the laws are not tuned for. (Not the
+        # p99: an idle machine's Python loop has a p99 of ~4 ms, and the test would then never judge.)
+        p50 = max((lat for t, _, lat in self.link if t > since + 2.0), default=float("nan"))
+        if p50 > 1e3 / RATE:
+            grown["late_commands_p50_ms"] = round(p50, 2)
         return grown
 
     def _on_ctrl(self, msg: JointState) -> None:
