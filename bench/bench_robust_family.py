@@ -47,7 +47,7 @@ class StageCase:
         return f"{self.seed}:{self.profile}:{eff}"
 
 
-def _draw_effect(name: str, rng: np.random.Generator, profile: str) -> tuple[float, dict]:
+def _draw_effect(name: str, rng: np.random.Generator) -> tuple[float, dict]:
     """A strength and shape from ranges a lab stage shows (units of :mod:`hyst_sim.truth_effects`)."""
     if name == "creep":
         return rng.uniform(0.01, 0.06), {}
@@ -76,7 +76,7 @@ def draw_case(seed: int) -> StageCase:
     k = rng.random()
     n = 0 if k < 1 / 6 else (2 if k > 0.75 else 1)
     names = list(rng.choice(EFFECTS, size=n, replace=False))
-    return StageCase(seed, profile, mbw, {e: _draw_effect(e, rng, profile) for e in names})
+    return StageCase(seed, profile, mbw, {e: _draw_effect(e, rng) for e in names})
 
 
 def plant_factory(case: StageCase, with_effects: bool = True):
