@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -25,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from hyst_bringup.loop import default_plant, run_closed_loop
+from hyst_common.runtime import stop_processes
 
 from hyst_control.controllers import ALGORITHMS, make_controller
 from hyst_model.core import pea_default
@@ -115,13 +117,7 @@ def _loop(cmds: list[list[str]], rate: float, seconds: float = 5.0) -> dict:
                            check=True)
             return _analyse(out, rate)
         finally:
-            for p in procs:
-                p.terminate()
-            for p in procs:
-                try:
-                    p.wait(10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
+            stop_processes(procs, sig=signal.SIGTERM)
 
 
 def loops() -> str:

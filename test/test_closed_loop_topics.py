@@ -9,6 +9,7 @@ through every ordered pair of the four algorithms: no command jump and no tracki
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -20,10 +21,11 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from hyst_bringup.loop import SimPlant, run_closed_loop
+from hyst_common.node import KEEP_ALL_RELIABLE
+from hyst_common.runtime import stop_processes
 from hyst_control.controllers import make_controller
 from hyst_control.reference import parse_reference
 from hyst_model.core import pea_default
@@ -63,13 +65,7 @@ def loop_processes():
         return procs[-1]
 
     yield start
-    for p in procs:
-        p.terminate()
-    for p in procs:
-        try:
-            p.wait(10)
-        except subprocess.TimeoutExpired:
-            p.kill()
+    stop_processes(procs, sig=signal.SIGTERM)
 
 
 def test_topics_match_in_process_and_switching_is_bumpless(loop_processes):
@@ -86,7 +82,7 @@ def test_topics_match_in_process_and_switching_is_bumpless(loop_processes):
 
     # keep-all: while this node is busy (not spinning) the lockstep loop waits for it instead of its history
     # overwriting the oldest samples (a keep-last 1000 reader lost 6.4 s of the run while it waited for services)
-    keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    keep_all = KEEP_ALL_RELIABLE
     node.create_subscription(JointState, "/stage/state", on_state, keep_all)
     node.create_subscription(JointState, "/stage/command", lambda m: cmds.__setitem__(_stamp(m), m.effort[0]),
                              keep_all)

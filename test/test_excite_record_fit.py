@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("rclpy")
+from hyst_common.runtime import stop_processes
 from hyst_control.excitation import ExcitationSpec, build_excitation
 from hyst_model.io.bag import read_state_bag
 from hyst_sim.bagio import read_raw
@@ -74,14 +75,7 @@ def test_excitation_recorded_from_sample_zero_and_fitted(tmp_path):
         rec.send_signal(signal.SIGINT)  # a second Ctrl-C during finalisation must not break the bag
         assert rec.wait(60) == 0, rec.stdout.read()
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for p in procs:
-            try:
-                p.wait(20)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        stop_processes(procs, grace=20)
     ex = build_excitation(ExcitationSpec(v_min=0.0, v_max=150.0, slew_max=1e5, dt=1 / RATE,
                                          parts=tuple(EXC["parts"].split(",")), n_steps=4, hold=0.1, periods=1,
                                          seconds=1.5, seed=3))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -24,6 +25,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from hyst_common.runtime import stop_processes
 from hyst_control.excitation import ExcitationSpec, build_excitation
 from hyst_control.reference import parse_reference
 from hyst_model.io.bag import write_state_bag
@@ -128,10 +130,4 @@ def test_ident_node_push_into_running_controller_leaves_no_transient(algorithm, 
 
 def _stop(procs: list[subprocess.Popen]) -> None:
     """SIGTERM (the nodes' runner stops on it), then kill what is still there after 10 s."""
-    for p in procs:
-        p.terminate()
-    for p in procs:
-        try:
-            p.wait(10)
-        except subprocess.TimeoutExpired:
-            p.kill()
+    stop_processes(procs, sig=signal.SIGTERM)

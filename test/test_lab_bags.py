@@ -25,6 +25,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
+from hyst_common.node import KEEP_ALL_RELIABLE
 from hyst_sim.bagio import read_raw
 
 pytestmark = [pytest.mark.slow, pytest.mark.ros]
@@ -259,10 +260,9 @@ def test_lockstep_waits_for_a_subscriber_slower_than_the_loop(tmp_path):
     acknowledged within 100 ms (the sim lost samples so); lockstep must wait for the reader instead. The controller's
     commands, read the same slow way, are complete after the first too.
     """
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     lab, probe = Lab(tmp_path), Probe()
-    keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    keep_all = KEEP_ALL_RELIABLE
     states: list[int] = []
     commands: list[int] = []
 

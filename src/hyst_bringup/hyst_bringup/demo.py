@@ -13,12 +13,12 @@ import argparse
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from hyst_common.runtime import stop_processes
 from hyst_control.controllers import parse_schedule
 from hyst_control.errors import LoopError
 from hyst_sim.bagio import default_bag_path
@@ -62,16 +62,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
 def run(args: argparse.Namespace) -> int:
     schedule = parse_schedule(args.schedule)
     if not schedule:
@@ -105,12 +95,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         out, err = loop.communicate(timeout=seconds + 30)
     except subprocess.TimeoutExpired:
-        _stop(loop)
-        _stop(rec)
+        stop_processes([loop, rec])
         raise LoopError("the closed loop did not finish in time") from None
     finally:
         time.sleep(0.3)
-        _stop(rec)
+        stop_processes([rec])
     summary = None
     for line in out.splitlines()[::-1]:
         if line.startswith("{"):

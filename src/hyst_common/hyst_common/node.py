@@ -20,6 +20,7 @@ import signal
 import sys
 import threading
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
@@ -28,12 +29,17 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_service import ParameterService
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
 from .errors import HystError
 from .runtime import own_args
 
-__all__ = ["run_node", "AtomicParametersNode", "fp_range", "int_range", "STARTUP_ERRORS"]
+__all__ = ["run_node", "AtomicParametersNode", "fp_range", "int_range", "STARTUP_ERRORS", "KEEP_ALL_RELIABLE"]
+
+#: Every sample reaches every reader (a slow reliable reader slows the writer instead of losing samples): the
+#: lockstep sim's ``/stage/state``, the bag recorder, test readers. ``depth`` only sizes the first allocation.
+KEEP_ALL_RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
 #: What a node may raise while it starts because of what the user gave it: one line, exit 2.
 STARTUP_ERRORS: tuple[type[BaseException], ...] = (HystError, ValueError, ParameterException)
@@ -89,10 +95,11 @@ def _executor(kind: str):
     return SingleThreadedExecutor()
 
 
-def run_node(make: Callable[[], Node], args: Sequence[str] | None = None, *, prog: str, usage: str,
+def run_node(make: Callable[..., Node], args: Sequence[str] | None = None, *, prog: str, usage: str = "",
              executor: str = "events", until: Callable[[Node], bool] | None = None,
              on_exit: Callable[[Node, bool], None] | None = None,
-             errors: tuple[type[BaseException], ...] = ()) -> int:
+             errors: tuple[type[BaseException], ...] = (),
+             parse: Callable[[list[str]], Any] | None = None) -> int:
     """Run the node ``make()`` until a signal, ``until(node)`` or the context ends; return the exit code.
 
     Parameters
@@ -110,13 +117,22 @@ def run_node(make: Callable[[], Node], args: Sequence[str] | None = None, *, pro
     until : callable, optional
         Stop when it returns True (a node that finishes its work, e.g. an excitation).
     on_exit : callable, optional
-        ``on_exit(node, stopped_by_signal)`` before the node is destroyed (flush, ramp to a safe output).
+        ``on_exit(node, stopped_by_signal)`` before the node is destroyed (flush, finalise a bag, ramp to a safe
+        output), on every way out once the node is built — also when a callback raised (the error is then
+        raised again after it, a bug's traceback is worth keeping).
     errors : tuple of exception types
         Further start-up errors of the node's own package.
+    parse : callable, optional
+        For a node with its own command line (the bag recorder and player): ``parse(own_args)`` (argparse: it
+        answers ``--help`` and refuses bad input with exit 2 itself) runs before ROS starts, and ``make`` is
+        called with its result. Without it, any non-ROS argument is refused.
     """
     argv = list(sys.argv if args is None else args)
     own = own_args(argv[1:])
-    if own:
+    parsed: tuple[Any, ...] = ()
+    if parse is not None:
+        parsed = (parse(own),)
+    elif own:
         if set(own) & {"-h", "--help"}:
             print(usage)
             return 0
@@ -139,7 +155,7 @@ def run_node(make: Callable[[], Node], args: Sequence[str] | None = None, *, pro
     node = None
     try:
         try:
-            node = make()
+            node = make(*parsed)
         except STARTUP_ERRORS + tuple(errors) as err:
             print(f"{prog}: error: {err}", file=sys.stderr)
             return 2
@@ -150,8 +166,9 @@ def run_node(make: Callable[[], Node], args: Sequence[str] | None = None, *, pro
                 ex.spin_once(timeout_sec=0.1)
         except (KeyboardInterrupt, ExternalShutdownException):
             stop.set()
-        if on_exit is not None:
-            on_exit(node, stop.is_set())
+        finally:  # also when a callback raised: the driver must still ramp to its safe output
+            if on_exit is not None:
+                on_exit(node, stop.is_set())
         ex.shutdown()
     finally:
         if node is not None:

@@ -1,5 +1,6 @@
 """Process-level helpers for the nodes (rclpy-free, so they are tested without ROS): command-line handling that
-leaves ROS arguments alone, and real-time scheduling for the nodes that close a 1 kHz loop.
+leaves ROS arguments alone, stopping node processes, and real-time scheduling for the nodes that close a 1 kHz
+loop.
 
 Real-time scheduling
 --------------------
@@ -20,7 +21,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-__all__ = ["Scheduling", "set_realtime", "RT_PRIORITY_MAX", "own_args"]
+__all__ = ["Scheduling", "set_realtime", "RT_PRIORITY_MAX", "own_args", "stop_processes"]
 
 #: Highest priority offered: 99 is left to the kernel's own watchdog threads.
 RT_PRIORITY_MAX = 98
@@ -92,3 +93,38 @@ def own_args(args: list[str] | None) -> list[str]:
     import sys
     argv = sys.argv[1:] if args is None else list(args)
     return argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv
+
+
+def stop_processes(procs, grace: float = 10.0, sig: int | None = None) -> list[int]:
+    """Stop node processes the way a user's Ctrl-C does, then kill what is left.
+
+    Parameters
+    ----------
+    procs : iterable of subprocess.Popen
+        Signalled all at once (``sig``, SIGINT by default: every hyst node's runner stops cleanly on it), then
+        waited for one after another, each up to ``grace`` seconds before it is killed.
+    grace : float
+        Seconds each process may take to shut down (a driver ramps to its safe output, a recorder finalises).
+    sig : int, optional
+        The signal; ``signal.SIGTERM`` for processes that are not hyst nodes.
+
+    Returns
+    -------
+    list of int
+        The exit codes, in the order of ``procs`` (negative: killed by that signal).
+    """
+    import signal
+    import subprocess
+
+    procs = list(procs)
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT if sig is None else sig)
+    codes = []
+    for p in procs:
+        try:
+            codes.append(p.wait(grace))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            codes.append(p.wait())
+    return codes

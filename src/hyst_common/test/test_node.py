@@ -135,3 +135,32 @@ def test_runner_stops_cleanly_on_a_signal(sig):
         if p.poll() is None:
             p.kill()
     assert p.returncode == 0 and "Traceback" not in err, err
+
+
+FAILING = r'''
+import sys
+from hyst_common.node import run_node
+from rclpy.node import Node
+
+class Failing(Node):
+    def __init__(self):
+        super().__init__("failing")
+        self.create_timer(0.01, self._boom)
+
+    def _boom(self):
+        raise ZeroDivisionError("callback bug")
+
+def on_exit(node, by_signal):
+    print(f"on_exit ran, by_signal={by_signal}", flush=True)
+
+sys.exit(run_node(Failing, [sys.argv[0]], prog="failing_node", executor=sys.argv[1], on_exit=on_exit))
+'''
+
+
+@pytest.mark.parametrize("executor", ["events", "single"])
+def test_runner_calls_on_exit_when_a_callback_raises(executor):
+    """The driver ramps to its safe output in ``on_exit``: that must happen on a callback's error too, and the
+    error must not be hidden (it is a bug: traceback, non-zero exit)."""
+    r = subprocess.run([sys.executable, "-c", FAILING, executor], capture_output=True, text=True, timeout=120)
+    assert "on_exit ran, by_signal=False" in r.stdout, (r.stdout, r.stderr)
+    assert r.returncode != 0 and "callback bug" in r.stderr

@@ -6,7 +6,7 @@ import sys
 import pytest
 
 from hyst_common import runtime
-from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
+from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime, stop_processes
 
 
 def test_zero_keeps_normal_scheduling_and_bad_values_are_one_error():
@@ -60,3 +60,18 @@ def test_own_args_are_those_before_ros_args():
     from hyst_common.runtime import own_args
     assert own_args(["-h", "--ros-args", "-p", "a:=1"]) == ["-h"]
     assert own_args(["--ros-args", "--help"]) == []
+
+
+def test_stop_processes_signals_then_kills_what_ignores_the_signal():
+    polite = subprocess.Popen([sys.executable, "-c", "import sys, time\nprint('up', flush=True)\ntime.sleep(600)"],
+                              stdout=subprocess.PIPE, text=True)
+    stubborn = subprocess.Popen([sys.executable, "-c", "import signal, time\nsignal.signal(signal.SIGINT, "
+                                 "signal.SIG_IGN)\nprint('up', flush=True)\ntime.sleep(600)"],
+                                stdout=subprocess.PIPE, text=True)
+    assert polite.stdout.readline().strip() == "up" and stubborn.stdout.readline().strip() == "up"
+    codes = stop_processes([polite, stubborn], grace=2.0)
+    assert codes[0] == -2  # SIGINT reached it (Python exits by the signal after its KeyboardInterrupt)
+    assert codes[1] == -9  # ignored SIGINT: killed after the grace time
+    assert polite.poll() is not None and stubborn.poll() is not None
+    polite.stdout.close()
+    stubborn.stdout.close()

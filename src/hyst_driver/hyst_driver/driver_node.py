@@ -11,7 +11,6 @@ published from it as they arrive, a lost port is reopened with backoff. Voltages
 """
 from __future__ import annotations
 
-import signal
 import sys
 import threading
 from collections import deque
@@ -20,13 +19,11 @@ from dataclasses import dataclass, replace
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
-from rclpy.signals import SignalHandlerOptions
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
-from hyst_common.node import AtomicParametersNode, fp_range, int_range
+from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 from hyst_common.profiles import GMA, PEA, get_profile
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
@@ -281,77 +278,21 @@ class DriverNode(AtomicParametersNode):
         return arr
 
 
+def _shutdown(node: "DriverNode", stopped_by_signal: bool) -> None:
+    """On every way out: stop the I/O, ramp the output to ``v_safe`` (confirmed by the read-back), close."""
+    node.stop_io()
+    ok = node.link.ramp_to_safe(max_seconds=_ramp_seconds(node.cfg))
+    print(f"hyst_driver_node: {'ramped to' if ok else 'could not confirm'} v_safe = {node.cfg.v_safe} V "
+          f"(link {node.link.health.state})", file=sys.stderr)
+    node.link.close()
+
+
 def main(args=None) -> int:
-    """Console script ``hyst_driver_node``.
-
-    The executor (rclpy's EventsExecutor: the lowest command latency, which the 1 kHz loop needs) spins in a
-    thread; the main thread owns SIGINT/SIGTERM, because in this rclpy EventsExecutor.spin() does not return on
-    a signal and its shutdown() hangs while spin() runs. On any way out the output ramps to ``v_safe`` before
-    the port closes.
-    """
-    from rclpy.utilities import remove_ros_args
-
-    user_args = remove_ros_args(args if args is not None else sys.argv)[1:]
-    if user_args:
-        if set(user_args) & {"-h", "--help"}:
-            print(usage())
-            return 0
-        print(f"hyst_driver_node: unexpected argument(s) {' '.join(user_args)}; settings are ROS parameters "
-              "(--ros-args -p name:=value); see --help", file=sys.stderr)
-        return 2
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    node = executor = spinner = None
-    code = 0
-    try:
-        node = DriverNode()
-        try:
-            from rclpy.experimental import EventsExecutor
-            executor = EventsExecutor()
-        except ImportError:  # pragma: no cover - older rclpy
-            executor = rclpy.executors.SingleThreadedExecutor()
-        executor.add_node(node)
-
-        def spin() -> None:  # spin_once in a loop: EventsExecutor.shutdown() hangs while spin() runs
-            while not stop.is_set():
-                executor.spin_once(timeout_sec=0.05)
-
-        spinner = threading.Thread(target=spin, name="hyst_driver_spin", daemon=True)
-        spinner.start()
-        while not stop.wait(0.1):
-            if not spinner.is_alive():  # a callback raised: stop, ramp down, report
-                print("hyst_driver_node: executor stopped unexpectedly", file=sys.stderr)
-                code = 1
-                break
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (DriverError, ConfigError, ValueError) as err:  # bad user input: one line, non-zero exit
-        print(f"hyst_driver_node: {err}", file=sys.stderr)
-        code = 2
-    except Exception as err:
-        if type(err).__module__.startswith(("hyst_", "rclpy")):
-            print(f"hyst_driver_node: {err}", file=sys.stderr)
-            code = 2
-        else:
-            raise
-    finally:
-        stop.set()
-        if node is not None:
-            node.stop_io()
-            ok = node.link.ramp_to_safe(max_seconds=_ramp_seconds(node.cfg))
-            print(f"hyst_driver_node: {'ramped to' if ok else 'could not confirm'} v_safe = {node.cfg.v_safe} V "
-                  f"(link {node.link.health.state})", file=sys.stderr)
-            node.link.close()
-        if executor is not None:
-            if spinner is not None:
-                spinner.join(2.0)
-            executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    """Console script ``hyst_driver_node``: :func:`hyst_common.node.run_node` with the EventsExecutor (the lowest
+    command latency, which the 1 kHz loop needs); on any way out (signal, error in a callback) the output ramps
+    to ``v_safe`` before the port closes."""
+    return run_node(DriverNode, args, prog="hyst_driver_node", usage=usage(), executor="events",
+                    errors=(DriverError, ConfigError), on_exit=_shutdown)
 
 
 def _ramp_seconds(cfg: DriverConfig) -> float:

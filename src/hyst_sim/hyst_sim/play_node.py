@@ -12,15 +12,14 @@ late messages at once rather than dropping them. ``--loop`` repeats until SIGINT
 from __future__ import annotations
 
 import argparse
-import sys
 import threading
 import time
 from pathlib import Path
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from hyst_common.node import run_node
 
 from .bagio import RawMessage, message_class, read_raw
 from .errors import BagError, SimError
@@ -115,34 +114,20 @@ def _parse(argv: list[str]) -> argparse.Namespace:
 
 
 def main(args=None) -> int:
-    """Console script ``hyst_bag_play``."""
-    from rclpy.utilities import remove_ros_args
+    """Console script ``hyst_bag_play``: :func:`hyst_common.node.run_node` with its own command line."""
+    made: dict = {}
 
-    a = _parse(remove_ros_args(args if args is not None else sys.argv)[1:])
-    try:
-        messages = list(read_raw(a.bag, a.topics))
-    except SimError as err:
-        print(f"hyst_bag_play: {err}", file=sys.stderr)
-        return 2
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = PlayNode(messages, a.rate, a.loop, a.delay, a.wait_for_subscribers)
+    def make(a: argparse.Namespace) -> PlayNode:
+        node = PlayNode(list(read_raw(a.bag, a.topics)), a.rate, a.loop, a.delay, a.wait_for_subscribers)
+        made.update(node=node, bag=a.bag)
         node.start()
-        while rclpy.ok() and not node.done.is_set():
-            rclpy.spin_once(node, timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except SimError as err:
-        print(f"hyst_bag_play: {err}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.stop()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    print(f"hyst_bag_play: published {node.published if node else 0} messages from {a.bag}")
-    return 0
+        return node
+
+    code = run_node(make, args, prog="hyst_bag_play", parse=_parse, executor="single", errors=(SimError,),
+                    until=lambda n: n.done.is_set(), on_exit=lambda n, _: n.stop())
+    if "node" in made:
+        print(f"hyst_bag_play: published {made['node'].published} messages from {made['bag']}")
+    return code
 
 
 if __name__ == "__main__":

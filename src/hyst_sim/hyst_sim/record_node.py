@@ -31,10 +31,10 @@ import time
 from pathlib import Path
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
-from rclpy.signals import SignalHandlerOptions
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from hyst_common.node import run_node
 
 from .bagio import RawBagWriter, default_bag_path, message_class
 from .errors import BagError, SimError
@@ -169,70 +169,61 @@ def _parse(argv: list[str]) -> argparse.Namespace:
 
 
 def main(args=None) -> int:
-    """Console script ``hyst_bag_record``."""
-    from rclpy.utilities import remove_ros_args
+    """Console script ``hyst_bag_record``: :func:`hyst_common.node.run_node` with its own command line; the bag
+    is finalised on every way out (signal, ``--duration``, an error in a callback)."""
+    made: dict = {}
 
-    argv = remove_ros_args(args if args is not None else sys.argv)[1:]
-    a = _parse(argv)
-    out = a.output or default_bag_path()
-    try:
+    def make(a: argparse.Namespace) -> RecordNode:
+        out = a.output or default_bag_path()
         if a.output is None:
             out.parent.mkdir(parents=True, exist_ok=True)
-        writer = RawBagWriter(out, compress=not a.no_compress)
-    except SimError as err:
-        print(f"hyst_bag_record: {err}", file=sys.stderr)
-        return 2
-    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-    main_thread = threading.current_thread() is threading.main_thread()
-    stop = threading.Event()
-    if main_thread:
-        # our own handlers instead of rclpy's, which shut the context down at once: the messages the
-        # middleware has already delivered must still be taken and written (drain, below)
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda _s, _f: stop.set())
-    else:
-        rclpy.init(args=args)
-    node = None
-    try:
-        node = RecordNode(writer, a.topics, a.duration)
+        writer = RawBagWriter(out, compress=not a.no_compress)  # refuses an existing directory
+        try:
+            node = RecordNode(writer, a.topics, a.duration)
+        except BaseException:
+            writer.close()
+            raise
+        made.update(node=node, writer=writer, out=out)
         print(f"hyst_bag_record: recording -> {out}", flush=True)
-        while rclpy.ok() and not node.done and not stop.is_set():
-            rclpy.spin_once(node, timeout_sec=0.1)
-        if stop.is_set() and rclpy.ok():
-            _drain(node, stop)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
+        return node
+
+    def finish(node: RecordNode, stopped_by_signal: bool) -> None:
+        if stopped_by_signal and rclpy.ok(context=node.context):
+            _drain(node)
         _ignore_signals_while_finalising()
-        if node is not None:
-            node.flush()
-        writer.close()  # always finalise the bag, also on SIGINT/SIGTERM
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    lost = f", {node.write_errors} write error(s)" if node is not None and node.write_errors else ""
-    print(f"hyst_bag_record: {writer.count} messages on {len(writer.topics)} topic(s) -> {out}{lost}")
-    if threading.current_thread() is threading.main_thread():
-        # console script: a late signal must not kill the exiting interpreter (exit -2 after a good bag);
-        # called in-process: give the caller its handlers back
-        for sig, old in previous.items():
-            signal.signal(sig, signal.SIG_IGN if args is None else old)
-    return 1 if lost else 0
+        node.flush()
+        node.writer.close()  # always finalise the bag, also on SIGINT/SIGTERM
+
+    code = run_node(make, args, prog="hyst_bag_record", parse=_parse, executor="single", errors=(SimError,),
+                    until=lambda n: n.done, on_exit=finish)
+    if threading.current_thread() is threading.main_thread() and args is None:
+        # console script: a late signal must not kill the exiting interpreter (exit -2 after a good bag)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
+    if "node" not in made:
+        return code
+    node, writer = made["node"], made["writer"]
+    lost = f", {node.write_errors} write error(s)" if node.write_errors else ""
+    print(f"hyst_bag_record: {writer.count} messages on {len(writer.topics)} topic(s) -> {made['out']}{lost}")
+    return 1 if lost and code == 0 else code
 
 
-def _drain(node: RecordNode, stop: threading.Event, quiet: float = 0.3, longest: float = 3.0) -> None:
+def _drain(node: RecordNode, quiet: float = 0.3, longest: float = 3.0) -> None:
     """After the stop signal: take what the middleware already delivered, until ``quiet`` s pass without a
     message (or ``longest`` s — a live stream never goes quiet —, or a second signal). A lockstep run ends faster
     than a recorder on a loaded machine writes: stopping at once lost the last 3100 of 4000 samples of a demo
     bag."""
-    stop.clear()  # a second signal ends the drain
+    again = threading.Event()  # a second signal ends the drain
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda _s, _f: again.set())
     print("hyst_bag_record: stopping: taking the messages already delivered (Ctrl-C again to stop at once)",
           file=sys.stderr, flush=True)
+    executor = node.executor
     end = time.monotonic() + longest
     last, quiet_since = node.received, time.monotonic()
-    while not stop.is_set() and time.monotonic() < end and rclpy.ok():
-        rclpy.spin_once(node, timeout_sec=0.05)
+    while executor is not None and not again.is_set() and time.monotonic() < end and rclpy.ok(context=node.context):
+        executor.spin_once(timeout_sec=0.05)
         if node.received != last:
             last, quiet_since = node.received, time.monotonic()
         elif time.monotonic() - quiet_since >= quiet:

@@ -47,7 +47,7 @@ from rclpy._rclpy_pybind11 import RCLError  # what a failed publish raises; rclp
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from hyst_common.node import KEEP_ALL_RELIABLE, AtomicParametersNode, fp_range, int_range, run_node
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .errors import SimError
@@ -84,7 +84,7 @@ class SimNode(AtomicParametersNode):
         # recorder on a loaded machine) slows the run down instead of losing samples (measured: keep-last 1000
         # lost 160 stretches of 20000 fast samples to a slow reader; keep-all lost none)
         if self._settings.mode == "lockstep":
-            qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+            qos = KEEP_ALL_RELIABLE
         else:
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         self._pub = self.create_publisher(JointState, "/stage/state", qos)
