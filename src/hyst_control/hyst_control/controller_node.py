@@ -13,6 +13,10 @@ callback), limits ``v_min``/``v_max``/``slew_max``/``v_safe``, ``watchdog_period
 ``model.*`` (from ``--ros-args --params-file P``; the identification node may push new values at run time).
 Watchdog: no state for ``watchdog_periods``/``rate`` seconds → command ``v_safe`` (slew-limited), log, and
 ERROR on /diagnostics; the next state restarts the controller bumplessly.
+
+Length (~430 lines): one node class is the adapter between messages/parameters and the pure controllers; the
+settings, gains, stability check and compensation it calls already live in their own modules, and what remains
+(declare, validate, swap, the per-sample callback, switching, diagnostics) shares the node's state.
 """
 from __future__ import annotations
 

@@ -1,0 +1,169 @@
+"""The numerical kernels of the ``dynamics`` effect (:mod:`.dynamics` describes the model): the exact ZOH/FOH
+discretisation of the series resonance and its numba recursion (:func:`series_filter`), the RK4 integration of
+the Bouc-Wen mass-spring-damper (:func:`msd_bw_simulate`) and the input interpolation between samples
+(:func:`upsample`). Also used by the controllers' resonance inverse.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from scipy.linalg import expm
+
+from ..errors import EffectError
+
+__all__ = ["series_filter", "msd_bw_simulate", "upsample", "HOLDS"]
+
+HOLDS = ("zoh", "foh")
+
+def _expm_with_input(fn: float, zeta: float, dt: float, ramp: bool) -> np.ndarray:
+    """exp(M·dt) of the resonance (y, ẏ) augmented by its input (held, or a ramp: input and slope states)."""
+    wn = 2.0 * np.pi * fn
+    n = 4 if ramp else 3
+    M = np.zeros((n, n))
+    M[0, 1] = 1.0
+    M[1, 0] = -wn * wn
+    M[1, 1] = -2.0 * zeta * wn
+    M[1, 2] = wn * wn
+    if ramp:
+        M[2, 3] = 1.0  # input slope state
+    return expm(M * dt)
+
+
+def _foh_matrices(fn: float, zeta: float, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact discretisation of ωn²/(s²+2ζωn s+ωn²) for a piecewise-linear input: Φ, Γ1, Γ2 (see series_filter)."""
+    E = _expm_with_input(fn, zeta, dt, ramp=True)
+    return E[:2, :2].copy(), E[:2, 2].copy(), E[:2, 3].copy() / dt
+
+
+def _zoh_matrices(fn: float, zeta: float, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact discretisation for an input held over each period: ``s_{k+1} = Φ s_k + Γ x_{k+1}``.
+
+    Written in the first-order-hold form of :func:`_series_run` (Γ1 = Γ2 = Γ, so Γ1 x_k + Γ2 (x_{k+1} − x_k)
+    = Γ x_{k+1}).
+    """
+    E = _expm_with_input(fn, zeta, dt, ramp=False)
+    g = E[:2, 2].copy()
+    return E[:2, :2].copy(), g, g.copy()
+
+
+@njit(cache=True)
+def _series_run(phi: np.ndarray, g1: np.ndarray, g2: np.ndarray, x: np.ndarray) -> np.ndarray:
+    n = x.size
+    y = np.empty(n)
+    if n == 0:
+        return y
+    p = x[0]
+    v = 0.0
+    y[0] = p
+    for k in range(n - 1):
+        dx = x[k + 1] - x[k]
+        pn = phi[0, 0] * p + phi[0, 1] * v + g1[0] * x[k] + g2[0] * dx
+        vn = phi[1, 0] * p + phi[1, 1] * v + g1[1] * x[k] + g2[1] * dx
+        p, v = pn, vn
+        y[k + 1] = p
+    return y
+
+
+def series_filter(x: np.ndarray, fn: float, zeta: float, dt: float, hold: str = "foh") -> np.ndarray:
+    """Pass ``x`` through the unit-DC-gain second-order low-pass (fn Hz, damping ζ), at rest at ``x[0]``.
+
+    ``hold='foh'``: ``s_{k+1} = Φ s_k + Γ1 x_k + Γ2 (x_{k+1} − x_k)`` for the state s = (y, ẏ), exact when x is
+    linear between samples; ``hold='zoh'``: ``s_{k+1} = Φ s_k + Γ x_{k+1}``, exact when x_{k+1} is held over
+    the period that ends at sample k+1.
+    """
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    if hold not in HOLDS:
+        raise EffectError(f"dynamics.hold must be one of {', '.join(HOLDS)}, not {hold!r}")
+    mats = _zoh_matrices if hold == "zoh" else _foh_matrices
+    phi, g1, g2 = mats(float(fn), float(zeta), float(dt))
+    return _series_run(phi, g1, g2, x)
+
+
+# ---------------------------------------------------------------------------------------------- feedback
+@njit(cache=True, inline="always")
+def _rhs(p: np.ndarray, uu: float, y: float, v: float, w: float) -> tuple[float, float, float]:
+    wn = 2.0 * np.pi * p[0]
+    acc = wn * wn * (p[2] * uu - (1.0 - p[3]) * y - w) - 2.0 * p[1] * wn * v
+    dw = p[3] * v - p[4] * abs(v) * w - p[5] * v * abs(w)
+    return v, acc, dw
+
+
+@njit(cache=True)
+def msd_bw_simulate(p: np.ndarray, ufine: np.ndarray, substeps: int, dt: float,
+                    y0: float = 0.0, v0: float = 0.0, w0: float = 0.0) -> np.ndarray:
+    """Integrate the mass-spring-damper with Bouc-Wen restoring force (RK4, ``substeps`` per sample).
+
+    Parameters
+    ----------
+    p : ndarray, shape (6,)
+        ``(fn, zeta, gain, share, bg, bd)``, see the module docstring.
+    ufine : ndarray, shape (2·substeps·(n−1) + 1,)
+        Input on the half-substep grid (RK4 needs the midpoints): ``ufine[2·substeps·k]`` is sample k.
+    substeps : int
+        RK4 steps per sample period.
+    dt : float
+        Sample period (s).
+    y0, v0, w0 : float
+        Initial displacement (m), velocity (m/s) and hysteretic displacement w = z/(k+α) (m).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Displacement at the sample instants (m); non-finite if the parameters make it diverge.
+    """
+    m2 = 2 * substeps
+    n = (ufine.size - 1) // m2 + 1
+    h = dt / substeps
+    out = np.empty(n)
+    y, v, w = y0, v0, w0
+    out[0] = y
+    for k in range(n - 1):
+        base = k * m2
+        for j in range(substeps):
+            i = base + 2 * j
+            u0, um, u1 = ufine[i], ufine[i + 1], ufine[i + 2]
+            k1y, k1v, k1w = _rhs(p, u0, y, v, w)
+            k2y, k2v, k2w = _rhs(p, um, y + 0.5 * h * k1y, v + 0.5 * h * k1v, w + 0.5 * h * k1w)
+            k3y, k3v, k3w = _rhs(p, um, y + 0.5 * h * k2y, v + 0.5 * h * k2v, w + 0.5 * h * k2w)
+            k4y, k4v, k4w = _rhs(p, u1, y + h * k3y, v + h * k3v, w + h * k3w)
+            y += h / 6.0 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
+            v += h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+            w += h / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
+            # During holds the state decays exponentially into subnormal floats, where every operation is
+            # ~100x slower (measured: 110 ms instead of 23 ms per 40k-sample run); 1e-200 m is nothing physical.
+            if abs(v) < 1e-200:
+                v = 0.0
+            if abs(w) < 1e-200:
+                w = 0.0
+            if abs(y) < 1e-200:
+                y = 0.0
+        out[k + 1] = y
+        if not np.isfinite(y):
+            for r in range(k + 2, n):
+                out[r] = np.nan
+            break
+    return out
+
+
+def upsample(u: np.ndarray, factor: int, method: str = "linear") -> np.ndarray:
+    """Input on a grid ``factor`` times finer (``(n−1)·factor + 1`` points, sample k at index ``k·factor``).
+
+    ``linear`` interpolates between samples; ``fft`` is band-limited interpolation assuming the record is one
+    or more whole periods of a periodic signal (exact for multisines).
+    """
+    u = np.ascontiguousarray(u, dtype=np.float64)
+    n = u.size
+    if factor == 1 or n < 2:
+        return u.copy()
+    if method == "linear":
+        return np.interp(np.arange((n - 1) * factor + 1) / factor, np.arange(n), u)
+    if method == "fft":
+        U = np.fft.rfft(u)
+        m = n * factor
+        Uf = np.zeros(m // 2 + 1, dtype=complex)
+        Uf[:U.size] = U
+        if n % 2 == 0:  # split the Nyquist bin so the result stays real and exact
+            Uf[n // 2] *= 0.5
+        uf = np.fft.irfft(Uf, m) * factor
+        return uf[: (n - 1) * factor + 1]
+    raise EffectError(f"dynamics.interp must be 'linear' or 'fft', not {method!r}")
