@@ -85,23 +85,42 @@ def test_rclpy_only_in_nodes_and_the_runner():
 
 PARAMETER_NODES = ["hyst_control/controller_node.py", "hyst_control/reference_node.py",
                    "hyst_control/excite_node.py", "hyst_model/ident_node.py", "hyst_model/residual_node.py",
-                   "hyst_sim/sim_node.py"]
+                   "hyst_sim/sim_node.py", "hyst_driver/driver_node.py"]
+NODE_FILES = sorted(_rel(pkg, path) for pkg, path, _ in _modules() if path.name.endswith("_node.py"))
+
+
+def _main_calls(rel: str) -> tuple[set[str], set[str]]:
+    """Names and attribute names called in the module's ``main``."""
+    pkg, name = rel.split("/")
+    tree = ast.parse((SRC / pkg / pkg / name).read_text(encoding="utf-8"))
+    main = next(n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == "main")
+    calls = [c for c in ast.walk(main) if isinstance(c, ast.Call)]
+    return {getattr(c.func, "id", "") for c in calls}, {getattr(c.func, "attr", "") for c in calls}
+
+
+@pytest.mark.parametrize("rel", NODE_FILES)
+def test_every_node_main_goes_through_the_one_runner(rel):
+    names, attrs = _main_calls(rel)
+    assert "run_node" in names, f"{rel}: main() does not call run_node"
+    assert not {"init", "spin", "spin_once", "try_shutdown"} & attrs, f"{rel}: main() runs rclpy itself"
 
 
 @pytest.mark.parametrize("rel", PARAMETER_NODES)
-def test_parameter_nodes_run_through_the_runner_with_all_or_nothing_parameters(rel):
+def test_parameter_nodes_have_all_or_nothing_parameters(rel):
     pkg, name = rel.split("/")
     tree = ast.parse((SRC / pkg / pkg / name).read_text(encoding="utf-8"))
     classes = [n for n in tree.body if isinstance(n, ast.ClassDef) and n.name.endswith("Node")]
     assert classes and all(any(getattr(b, "id", "") == "AtomicParametersNode" for b in c.bases) for c in classes)
-    main = next(n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == "main")
-    calls = {getattr(c.func, "id", "") for c in ast.walk(main) if isinstance(c, ast.Call)}
-    assert "run_node" in calls and "init" not in {getattr(c.func, "attr", "") for c in ast.walk(main)
-                                                   if isinstance(c, ast.Call)}
 
 
-def test_the_driver_node_has_all_or_nothing_parameters():
-    """Its main keeps its own loop for now (a spinner thread, the ramp to v_safe before the port closes)."""
-    tree = ast.parse((SRC / "hyst_driver" / "hyst_driver" / "driver_node.py").read_text(encoding="utf-8"))
-    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "DriverNode")
-    assert [getattr(b, "id", "") for b in cls.bases] == ["AtomicParametersNode"]
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_a_package_tests_itself_with_its_own_dependencies_only(pkg):
+    """A rig that installs only the driver (and hyst_common) can run the driver's tests: a package's tests import
+    what the package may import, nothing above it (cross-package tests live in the top-level test/: the
+    controllers on the sim's plant in test/control/)."""
+    bad = []
+    for path in sorted((SRC / pkg / "test").rglob("*.py")):
+        extra = _imported(ast.parse(path.read_text(encoding="utf-8"))) & set(PACKAGES) - ALLOWED[pkg] - {pkg}
+        if extra:
+            bad.append((path.name, sorted(extra)))
+    assert not bad, bad

@@ -241,12 +241,13 @@ def main(argv: list[str] | None = None, *, build=None) -> int:
     ----------
     argv : list of str, optional
         Command-line arguments (``sys.argv[1:]`` if omitted).
-    build : callable
-        ``build(profile, rate, scenario, params_file, seed) -> EmulatedDevice``; the console script
-        (:func:`hyst_bringup.emulator.main`) passes one on the sim's plant.
+    build : callable, optional
+        ``build(profile, rate, scenario, params_file, seed) -> EmulatedDevice``; by default a linear stage
+        (:func:`hyst_driver.linear_stage.linear_device`: the driver alone, no simulator); the console script
+        ``hyst_emulator`` (:func:`hyst_bringup.emulator.main`) passes one on the sim's plant.
     """
     if build is None:
-        raise TypeError("main() needs build=: a factory of EmulatedDevice (see hyst_bringup.emulator)")
+        from .linear_stage import linear_device as build
     args = _parse(argv)
     try:
         rates = FaultRates.parse(args.faults)

@@ -7,11 +7,11 @@ import time
 
 import pytest
 
-from hyst_bringup.emulator import build_device
 from hyst_driver.adapter import make_adapter
 from hyst_driver.emulator import PtyEmulator
 from hyst_driver.safety import Limits
 from hyst_driver.transport import DeviceLink, SerialTransport
+from hyst_driver.linear_stage import linear_device
 
 #: Driver limits deliberately narrower than the emulated amplifier (0..150 V), so that the device would accept
 #: a voltage the driver must never send.
@@ -30,7 +30,7 @@ class Rig:
     """An emulator thread plus a DeviceLink serviced from the test's own thread."""
 
     def __init__(self, protocol: str, limits: Limits = TEST_LIMITS, seed: int = 0, **link_kw) -> None:
-        self.device = build_device("pea", 1000.0, seed=seed)
+        self.device = linear_device("pea", 1000.0, seed=seed)
         self.emu = PtyEmulator(self.device, seed=seed).start()
         ad = make_adapter(protocol, 2e-9, (-15.0, 165.0))
         kw = dict(command_timeout=0.05, link_timeout=0.1, err_poll_period=0.01)

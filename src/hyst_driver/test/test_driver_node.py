@@ -14,15 +14,15 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from hyst_bringup.emulator import build_device
 from hyst_driver.emulator import FAULTS, PtyEmulator
+from hyst_driver.linear_stage import linear_device
 
 pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
 def emu():
-    e = PtyEmulator(build_device("pea", 1000.0)).start()
+    e = PtyEmulator(linear_device("pea", 1000.0)).start()
     yield e
     e.stop()
 

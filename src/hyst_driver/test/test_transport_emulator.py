@@ -12,11 +12,11 @@ import time
 import pytest
 import serial
 
-from hyst_bringup.emulator import build_device
 from hyst_driver import protocol_ascii as hdb
 from hyst_driver.emulator import EmulatedDevice, FaultRates, PtyEmulator
 from hyst_driver.errors import LinkError
 from hyst_driver.transport import SerialTransport
+from hyst_driver.linear_stage import linear_device
 
 #: Deadline (s) of every wait: only decides when a hung test gives up.
 DEADLINE = 30.0  # generous: only a failing run waits it out (10 s ran out at load 20)
@@ -60,7 +60,7 @@ def test_open_failures_back_off_exponentially():
 
 
 def test_vanished_pty_raises_link_error():
-    with PtyEmulator(build_device("pea", 1000.0)) as emu:
+    with PtyEmulator(linear_device("pea", 1000.0)) as emu:
         t = SerialTransport(emu.link)
         assert t.try_open(0.0)
         emu.inject("unplug", 1.5)  # long: the checks while unplugged must not race the replug on a loaded host
@@ -80,7 +80,7 @@ def test_vanished_pty_raises_link_error():
 
 @pytest.fixture(scope="module")
 def dev():
-    return build_device("pea", 1000.0)
+    return linear_device("pea", 1000.0)
 
 
 def test_emulated_device_hdb_replies_byte_for_byte(dev):
@@ -115,7 +115,7 @@ def test_fault_rates_parse():
 
 
 def _emulator_cmd(*args):
-    return [sys.executable, "-c", "import sys; from hyst_bringup.emulator import main; sys.exit(main())", *args]
+    return [sys.executable, "-c", "import sys; from hyst_driver.emulator import main; sys.exit(main())", *args]
 
 
 def test_cli_bad_input_is_one_line_and_exit_2():
