@@ -27,6 +27,8 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from hyst_model.core import MBWParams
 
 from .base import BaseController
@@ -156,7 +158,8 @@ def plan_compensation(model: MBWParams, effects: Sequence[str], values: Mapping[
         if missing:
             raise ConfigError(f"effect {e.name}: parameter(s) {', '.join(e.name + '.' + n for n in missing)} "
                               "missing from the model")
-        theta = [float(values[f"{e.name}.{n}"]) for n in names]
+        # an array, as Effect.online takes it: a list broke (or silently repeated) array arithmetic on theta
+        theta = np.array([float(values[f"{e.name}.{n}"]) for n in names], dtype=np.float64)
         for p, v in zip(e.params(), theta):
             if not (math.isfinite(v) and p.lower <= v <= p.upper):
                 raise ConfigError(f"effect {e.name}: {e.name}.{p.name} = {v:g} {p.unit} lies outside "
