@@ -88,3 +88,27 @@ def test_saturation_respected_as_a_limit():
     # the stage (no saturation in this plant) is driven to the model's reachable limit, not beyond
     assert r.y.max() < comp.target(top, 0.0) + 50e-9
     assert math.isfinite(r.u.max()) and r.u.max() <= 150.0
+
+
+def test_effects_get_their_parameters_as_an_array(monkeypatch):
+    """Effect.online takes θ as an array: a user effect's array arithmetic must work on it (a list repeated)."""
+    from hyst_model.effects import EFFECTS, Effect
+    from hyst_model.model import Param
+
+    seen = []
+
+    class Doubled(Effect):
+        name = "doubled_test"
+        kind = "output"
+
+        def params(self):
+            return (Param("gain", 0.0, -1.0, 1.0),)
+
+        def online(self, theta, base=None):
+            seen.append(theta * 2)
+            return None
+
+    monkeypatch.setitem(EFFECTS, "doubled_test", Doubled)
+    comp = plan_compensation(pea_default(), ["doubled_test"], {"doubled_test.gain": 0.25}, {}, DT)
+    assert list(seen[0]) == [0.5]
+    assert "doubled_test" in comp.unused

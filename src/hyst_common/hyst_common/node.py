@@ -20,7 +20,7 @@ import signal
 import sys
 import threading
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
@@ -43,6 +43,9 @@ KEEP_ALL_RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000, relia
 
 #: What a node may raise while it starts because of what the user gave it: one line, exit 2.
 STARTUP_ERRORS: tuple[type[BaseException], ...] = (HystError, ValueError, ParameterException)
+
+#: The node type :func:`run_node` builds (its ``until`` and ``on_exit`` see that node).
+NodeT = TypeVar("NodeT", bound=Node)
 
 
 def fp_range(lo: float, hi: float) -> list[FloatingPointRange]:
@@ -95,9 +98,9 @@ def _executor(kind: str):
     return SingleThreadedExecutor()
 
 
-def run_node(make: Callable[..., Node], args: Sequence[str] | None = None, *, prog: str, usage: str = "",
-             executor: str = "events", until: Callable[[Node], bool] | None = None,
-             on_exit: Callable[[Node, bool], None] | None = None,
+def run_node(make: Callable[..., NodeT], args: Sequence[str] | None = None, *, prog: str, usage: str = "",
+             executor: str = "events", until: Callable[[NodeT], bool] | None = None,
+             on_exit: Callable[[NodeT, bool], None] | None = None,
              errors: tuple[type[BaseException], ...] = (),
              parse: Callable[[list[str]], Any] | None = None) -> int:
     """Run the node ``make()`` until a signal, ``until(node)`` or the context ends; return the exit code.
@@ -152,7 +155,7 @@ def run_node(make: Callable[..., Node], args: Sequence[str] | None = None, *, pr
         for sig, old in previous.items():
             signal.signal(sig, old)
         return 2
-    node = None
+    node: NodeT | None = None
     try:
         try:
             node = make(*parsed)

@@ -27,6 +27,8 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from hyst_model.core import MBWParams
 
 from .base import BaseController
@@ -130,12 +132,13 @@ def plan_compensation(model: MBWParams, effects: Sequence[str], values: Mapping[
     from hyst_model.spec import build_model
 
     from hyst_model.effects import EFFECTS
+    from hyst_model.effects.base import ComposedModel
 
     comp = Compensation()
     effects = order = [str(e) for e in effects]
-    for e in effects:
-        if e not in EFFECTS:  # a user effect whose module this process did not load
-            comp.unused[e] = "unknown to this process (a user effect?): the controllers cannot use it"
+    for name in effects:
+        if name not in EFFECTS:  # a user effect whose module this process did not load
+            comp.unused[name] = "unknown to this process (a user effect?): the controllers cannot use it"
     effects = [e for e in effects if e in EFFECTS]
     if not effects:
         return comp
@@ -147,13 +150,16 @@ def plan_compensation(model: MBWParams, effects: Sequence[str], values: Mapping[
         composed = build_model("mbw", effects, cfg)
     except (HystError, ValueError, TypeError) as err:
         raise ConfigError(f"cannot build the model's effects {', '.join(effects)}: {err}") from err
+    if not isinstance(composed, ComposedModel):  # build_model composes whenever there are effects
+        raise ConfigError(f"the model with effects {', '.join(effects)} is not a composed model")
     for e in composed.effects:
         names = [p.name for p in e.params()]
         missing = [n for n in names if f"{e.name}.{n}" not in values]
         if missing:
             raise ConfigError(f"effect {e.name}: parameter(s) {', '.join(e.name + '.' + n for n in missing)} "
                               "missing from the model")
-        theta = [float(values[f"{e.name}.{n}"]) for n in names]
+        # an array, as Effect.online takes it: a list broke (or silently repeated) array arithmetic on theta
+        theta = np.array([float(values[f"{e.name}.{n}"]) for n in names], dtype=np.float64)
         for p, v in zip(e.params(), theta):
             if not (math.isfinite(v) and p.lower <= v <= p.upper):
                 raise ConfigError(f"effect {e.name}: {e.name}.{p.name} = {v:g} {p.unit} lies outside "
@@ -242,7 +248,8 @@ class Compensated:
         self._y_prev = math.nan
         # References passed, newest first: with a preview of d samples the newest measurement answers the one
         # passed d + 1 samples ago (the published error compares with that, not with a future reference).
-        self._passed: deque[float] = deque(maxlen=int(round(comp.preview / inner.dt)) + 1)
+        self._n_passed = int(round(comp.preview / inner.dt)) + 1
+        self._passed: deque[float] = deque(maxlen=self._n_passed)
 
     def __getattr__(self, item):  # dt, gains, set_model, sync_applied, notice_gap, ...
         return getattr(self.inner, item)
@@ -272,7 +279,7 @@ class Compensated:
         self._r_prev = self._r_aim = r0
         self._y_prev = float(y0)
         self._passed.clear()
-        self._passed.extend([r0] * self._passed.maxlen)
+        self._passed.extend([r0] * self._n_passed)
 
     def step(self, r_k: float, y_k: float) -> float:
         inner = self.inner

@@ -36,9 +36,9 @@ class ExciteNode(AtomicParametersNode):
         self.spec = self._read()
         self.excitation = build_excitation(self.spec)
         self.done = False
-        self._t_first = None
-        self._k_last = None             # index of the last sample answered
-        self._v_last = None             # the command sent for it (V)
+        self._t_first: float | None = None  # stamp (s) of the first state answered
+        self._k_last: int | None = None     # index of the last sample answered
+        self._v_last: float | None = None   # the command sent for it (V); set with _k_last
         self._resume = (0.0, 0.0)       # (stamp s, offset V) of the last gap: the offset fades over step_rise
         self.answered = 0
         self.add_on_set_parameters_callback(
@@ -141,7 +141,8 @@ class ExciteNode(AtomicParametersNode):
         """
         u = self.excitation.u
         uk = float(u[max(k, 0)])
-        if self._k_last is not None and k > self._k_last + 1 and math.isfinite(uk) and self.spec.step_rise > 0:
+        if self._k_last is not None and self._v_last is not None and k > self._k_last + 1 and math.isfinite(uk) \
+                and self.spec.step_rise > 0:
             self._resume = (t, self._v_last - uk)
         t0, off = self._resume
         x = (t - t0) / self.spec.step_rise if self.spec.step_rise > 0 else 1.0

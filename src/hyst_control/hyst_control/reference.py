@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TypedDict
 
 import numpy as np
 
@@ -139,17 +140,25 @@ class Reference:
         raise ReferenceError_(f"unhandled shape {s!r}")  # pragma: no cover
 
 
-_DEFAULTS = {
-    "step": dict(amplitude=15 * UM, offset=5 * UM),
-    "ramp": dict(amplitude=15 * UM, offset=5 * UM),
-    "step+ramp": dict(amplitude=15 * UM, offset=5 * UM),
-    "stepramp": dict(amplitude=15 * UM, offset=5 * UM),
-    "sine": dict(amplitude=10 * UM, offset=15 * UM),
-    "c1": dict(amplitude=10 * UM, offset=15 * UM),
-    "c2": dict(amplitude=10 * UM, offset=15 * UM, frequency=20.0),
-    "c3": dict(amplitude=10 * UM, offset=15 * UM),
-    "case3": dict(amplitude=10 * UM, offset=15 * UM),
-    "constant": dict(amplitude=0.0, offset=15 * UM),
+class _Shape(TypedDict, total=False):
+    """A shape's defaults: keyword arguments of :class:`Reference`."""
+
+    amplitude: float
+    frequency: float
+    offset: float
+
+
+_DEFAULTS: dict[str, _Shape] = {
+    "step": _Shape(amplitude=15 * UM, offset=5 * UM),
+    "ramp": _Shape(amplitude=15 * UM, offset=5 * UM),
+    "step+ramp": _Shape(amplitude=15 * UM, offset=5 * UM),
+    "stepramp": _Shape(amplitude=15 * UM, offset=5 * UM),
+    "sine": _Shape(amplitude=10 * UM, offset=15 * UM),
+    "c1": _Shape(amplitude=10 * UM, offset=15 * UM),
+    "c2": _Shape(amplitude=10 * UM, offset=15 * UM, frequency=20.0),
+    "c3": _Shape(amplitude=10 * UM, offset=15 * UM),
+    "case3": _Shape(amplitude=10 * UM, offset=15 * UM),
+    "constant": _Shape(amplitude=0.0, offset=15 * UM),
 }
 
 
@@ -169,7 +178,7 @@ def parse_reference(spec: str) -> Reference:
     if shape not in _DEFAULTS:
         raise ReferenceError_(f"unknown reference {spec!r}; use step, ramp, step+ramp, sine:F[:A_um], c1, c2, "
                               "c3, case3 or constant[:LEVEL_um]")
-    kw = dict(_DEFAULTS[shape])
+    kw = _DEFAULTS[shape].copy()
     shape = "step+ramp" if shape == "stepramp" else shape
     try:
         nums = [float(x) for x in parts[1:]]

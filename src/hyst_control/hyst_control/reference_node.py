@@ -41,7 +41,7 @@ class ReferenceNode(AtomicParametersNode):
         self._ref = self._build()
         self._rate = float(self.get_parameter("rate").value)
         self._duration = float(self.get_parameter("duration").value)
-        self._t_start = None
+        self._t_start: int | None = None  # clock time (ns) of the first sample of this trajectory
         self._pub = self.create_publisher(JointState, "/stage/reference", 10)
         self._timer = self.create_timer(1.0 / self._rate, self._tick)
         self.add_on_set_parameters_callback(self._on_set)

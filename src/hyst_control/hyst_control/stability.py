@@ -294,7 +294,10 @@ def _robust_fast(algorithm, gains, model, dt, res, gm, v_range) -> bool:
     """Stable on a 13-point grid of γ in [1/GM, GM] (the derating search; the result is then checked exactly)."""
     mu = _mu_max(model, *v_range) if algorithm == "pid" else model.zeta1
     pn, pd = plant_tf(model, dt, res, mu)
-    cn, cd = controller_tf(algorithm, gains, model, dt)
+    c = controller_tf(algorithm, gains, model, dt)
+    if c is None:  # only closed loops are derated (_DERATED)
+        raise ConfigError(f"algorithm {algorithm!r} has no feedback loop to check")
+    cn, cd = c
     return bool(np.all(_radii(cn, cd, pn, pd, np.geomspace(1.0 / gm, gm, 13)) < 1.0))
 
 
@@ -324,7 +327,7 @@ def derate(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | 
     if not ok:
         return None
     hi = ok[0]
-    lo = grid[max(np.searchsorted(grid, hi) - 1, 0)]
+    lo = grid[max(int(np.searchsorted(grid, hi)) - 1, 0)]
     for _ in range(12):  # refine towards the configured gains between the last failing and the first passing t
         mid = 0.5 * (lo + hi)
         if _robust_fast(algorithm, _candidate(algorithm, gains, mid), model, dt, res, gain_margin, v_range):

@@ -10,7 +10,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass
-from typing import Union
+from typing import Union, cast
 
 from . import protocol_ascii as hdb
 from . import protocol_gcs as gcs
@@ -315,22 +315,25 @@ class GcsAdapter(Adapter):
                 self._pending.clear()
                 self._pos = None
                 continue
+            # decode_reply's reply type follows from the query: AxisValue (POS?/VOL?), ErrorCode, IdnReply
             if expect == "POS?":
-                self._pos = msg.value * self.POSITION_UNIT_M
+                self._pos = cast(gcs.AxisValue, msg).value * self.POSITION_UNIT_M
             elif expect == "VOL?":
+                volts = cast(gcs.AxisValue, msg).value
                 if self._pos is None:
                     events.append(BadFrame("unexpected", "VOL? reply without POS?"))
-                elif not self._plausible(msg.value):
-                    events.append(BadFrame("implausible", f"applied voltage {msg.value} V"))
+                elif not self._plausible(volts):
+                    events.append(BadFrame("implausible", f"applied voltage {volts} V"))
                 else:
-                    events.append(Reading(self._pos, msg.value, None))
+                    events.append(Reading(self._pos, volts, None))
                 self._pos = None
             elif expect == "ERR?":
-                if msg.code != 0:
-                    events.append(DeviceFault(msg.code, gcs.ERROR_CODES.get(msg.code, "error"),
-                                              severe=msg.code >= 1000))
+                err_code = cast(gcs.ErrorCode, msg).code
+                if err_code != 0:
+                    events.append(DeviceFault(err_code, gcs.ERROR_CODES.get(err_code, "error"),
+                                              severe=err_code >= 1000))
             else:
-                events.append(Identified(msg.text))
+                events.append(Identified(cast(gcs.IdnReply, msg).text))
         return events
 
 

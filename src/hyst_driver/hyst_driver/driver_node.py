@@ -130,10 +130,13 @@ class DriverNode(AtomicParametersNode):
         lo, hi = prof.v_min, prof.v_max
         for name, default, rng, text in param_table(prof):
             desc = ParameterDescriptor(description=text)
-            if isinstance(default, int):
-                desc.integer_range = int_range(rng[0], rng[1])
-            elif isinstance(default, float):
-                desc.floating_point_range = fp_range(*rng)
+            if isinstance(default, (int, float)):
+                if rng is None:  # every number in the table has its range
+                    raise ConfigError(f"parameter {name}: a number without a range")
+                if isinstance(default, int):
+                    desc.integer_range = int_range(rng[0], rng[1])
+                else:
+                    desc.floating_point_range = fp_range(*rng)
             self.declare_parameter(name, default, desc)
         self.cfg = self._read_config({}).validate()
         self.add_on_set_parameters_callback(self._on_set)

@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Union
 
@@ -350,7 +351,7 @@ def decode_command(line: bytes) -> Command:
     """Decode a host → device line (the emulator's side). Raises :class:`ChecksumError`/:class:`ProtocolError`."""
     f = unframe(line)
     kind, n = f[0], len(f) - 1
-    simple = {b"ID": Identify, b"RP": ReadPosition, b"SP": StopStream}
+    simple: dict[bytes, Callable[[], Command]] = {b"ID": Identify, b"RP": ReadPosition, b"SP": StopStream}
     if kind in simple:
         if n:
             raise ProtocolError(f"{kind.decode()} takes no argument")

@@ -11,8 +11,12 @@ import importlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .errors import BagError
+
+if TYPE_CHECKING:  # pragma: no cover - typing only (rosbags is imported on first use)
+    from rosbags.interfaces import Connection
 
 __all__ = ["RawMessage", "RawBagWriter", "read_raw", "bag_topics", "message_class", "default_bag_path"]
 
@@ -81,7 +85,7 @@ class RawBagWriter:
             self._writer.open()
         except Exception as err:  # rosbags raises its own WriterError / OSError
             raise BagError(f"{self.path}: cannot create bag ({err})") from err
-        self._conns: dict[str, object] = {}
+        self._conns: dict[str, Connection] = {}
         self.count = 0
         self._closed = False
 

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from hyst_common.node import run_node
@@ -54,7 +55,7 @@ class PlayNode(Node):
         self.messages, self.rate, self.loop = messages, float(rate), bool(loop)
         self.delay, self.wait = float(delay), float(wait_for_subscribers)
         qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-        self._pubs = {}
+        self._pubs: dict[str, Publisher] = {}
         for m in messages:
             if m.topic not in self._pubs:
                 self._pubs[m.topic] = self.create_publisher(message_class(m.msgtype), m.topic, qos)

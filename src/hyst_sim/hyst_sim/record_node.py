@@ -33,6 +33,7 @@ from pathlib import Path
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 
 from hyst_common.node import run_node
 
@@ -72,7 +73,7 @@ class RecordNode(Node):
         self.wanted = tuple(self.types)
         self.duration = duration
         self.done = False
-        self._subs: dict[str, object] = {}
+        self._subs: dict[str, Subscription | None] = {}  # None: the topic cannot be recorded
         self._best_effort: set[str] = set()
         self._t0 = time.monotonic()
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
@@ -138,13 +139,17 @@ class RecordNode(Node):
 
     def _adapt_qos(self, topic: str) -> None:
         """A reliable subscription does not match a best-effort publisher: switch once one appears."""
-        if self._subs[topic] is None or topic in self._best_effort:
+        sub = self._subs[topic]
+        if sub is None or topic in self._best_effort:
             return
         infos = self.get_publishers_info_by_topic(topic)
         if any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos):
+            msgtype = self.types[topic]
+            if msgtype is None:  # _subscribe set it when it made the subscription
+                raise SimError(f"{topic}: subscribed without a message type")
             self._best_effort.add(topic)
-            self.destroy_subscription(self._subs[topic])
-            self._subscribe(topic, self.types[topic])
+            self.destroy_subscription(sub)
+            self._subscribe(topic, msgtype)
             self.get_logger().info(f"{topic}: best-effort publisher found, subscription switched to best effort")
 
     def _writer_for(self, topic: str):

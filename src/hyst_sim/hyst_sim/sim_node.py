@@ -91,7 +91,8 @@ class SimNode(AtomicParametersNode):
         self._wait_n = int(self.get_parameter("wait_for_subscribers").value)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(JointState, "/stage/command", self._on_command, 10)
-        self._cmd = None                 # (last commanded voltage V, monotonic arrival time), one object: atomic
+        # (last commanded voltage V, monotonic arrival time), one object: atomic
+        self._cmd: tuple[float, float] | None = None
         self._k = 0                      # samples taken
         self._stamp_ns = 0               # lockstep clock (ns)
         self._last_msg: JointState | None = None
@@ -351,7 +352,8 @@ class SimNode(AtomicParametersNode):
     def _announce(self) -> None:
         """Lockstep: publish sample 0 once someone listens and commands, repeat it until it is answered."""
         if self._answered:
-            self.destroy_timer(self._timer)
+            if self._timer is not None:  # it is: this is its callback
+                self.destroy_timer(self._timer)
             self._timer = None
             return
         if self._pub.get_subscription_count() < self._wait_n or self.count_publishers("/stage/command") == 0:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from .errors import SimError
 from .plant import PlantConfig
@@ -48,7 +49,8 @@ class SimSettings:
 
 def plant_config(s: SimSettings) -> PlantConfig:
     """The plant a settings object describes: profile or params file, limits, effects, then the scenario."""
-    common = dict(sensor=False, seed=s.seed, v_min=s.v_min, v_max=s.v_max, slew_max=s.slew_max, v_init=s.v_safe)
+    common: dict[str, Any] = dict(sensor=False, seed=s.seed, v_min=s.v_min, v_max=s.v_max, slew_max=s.slew_max,
+                                  v_init=s.v_safe)
     if s.params_file:
         cfg = PlantConfig.from_params_file(s.params_file, s.profile, s.rate, **common)
     else:

@@ -26,8 +26,8 @@ effect           strength (unit)        model
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
-from typing import ClassVar
+from dataclasses import Field, dataclass, field, fields, replace
+from typing import Any, ClassVar
 
 import numpy as np
 from numba import njit
@@ -60,6 +60,9 @@ class _Effect:
     SPEC: ClassVar[StrengthSpec]
     name: ClassVar[str]
     strength: float
+    # Every effect is a frozen dataclass (the subclasses): declared so dataclasses.fields/replace take an effect
+    # class or object typed as _Effect. An annotation only: nothing is set here.
+    __dataclass_fields__: ClassVar[dict[str, Field[Any]]]
 
     @property
     def enabled(self) -> bool:
@@ -222,7 +225,8 @@ class Quantization(_Effect):
     strength: float = 0.0
 
 
-_CLASSES = {c.name: c for c in (Creep, Asymmetry, Dynamics, Delay, Drift, Saturation, Noise, Quantization)}
+_CLASSES: dict[str, type[_Effect]] = {c.name: c for c in (Creep, Asymmetry, Dynamics, Delay, Drift, Saturation, Noise,
+                                                           Quantization)}
 
 
 @dataclass(frozen=True)
@@ -244,7 +248,7 @@ class Effects:
         return Effects.effect_class(name).SPEC
 
     @staticmethod
-    def effect_class(name: str) -> type:
+    def effect_class(name: str) -> type[_Effect]:
         try:
             return _CLASSES[name]
         except KeyError:

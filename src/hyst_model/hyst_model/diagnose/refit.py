@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -109,11 +109,11 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
     fitter = fitter or default_fitter
     m = compose(base_model, list(names), cfg)
     if prior:  # lowest precedence: values an effect's own start does not provide
-        nm = m.names
         for e in m.effects:
             pre = {p.name: prior[f"{e.name}.{p.name}"] for p in e.params() if f"{e.name}.{p.name}" in prior}
-            base_start = e.start
-            e.start = (lambda f, pre: lambda *a: {**pre, **(f(*a) or {})})(base_start, pre)
+            # Per instance, so every later m.start (the fitter's too) sees it; setattr: mypy forbids assigning
+            # to a method, and this override is deliberate.
+            setattr(e, "start", _start_with_prior(e.start, pre))
     th0 = m.start(t, u, y, theta_base)
     if carry:
         nm = m.names
@@ -134,6 +134,12 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
         th1[: len(base_model.names)] = fitter(base_model, t, uu, y, None)
     th = fitter(m, t, u, y, th1)
     return m, th, _simulate(m, th, t, u)
+
+
+def _start_with_prior(start: Callable[..., dict[str, float] | None], pre: dict[str, float]
+                      ) -> Callable[..., dict[str, float]]:
+    """``start`` (an :meth:`Effect.start`) with the values it does not provide taken from ``pre``."""
+    return lambda *a: {**pre, **(start(*a) or {})}
 
 
 def _point(m: Model, values: dict) -> np.ndarray:

@@ -342,9 +342,9 @@ def write_report(dir: str | os.PathLike, record, model_output: np.ndarray, stats
                 for c in diagnosis.get("candidates", [])]
         parts.append(_table(["effect", "validation RMSE (nm)", "improvement", "evidence"], rows))
     if ladder:
-        rows = [(r.get("model"), _nm(float(r.get("rmse", np.nan))),
-                 _nm(float(r["rmse_train"])) if r.get("rmse_train") is not None else "") for r in ladder]
-        parts.append("<h2>Error ladder</h2>" + _table(["model", "validation RMSE (nm)", "training RMSE (nm)"], rows))
+        rungs = [(r.get("model"), _nm(float(r.get("rmse", np.nan))),
+                  _nm(float(r["rmse_train"])) if r.get("rmse_train") is not None else "") for r in ladder]
+        parts.append("<h2>Error ladder</h2>" + _table(["model", "validation RMSE (nm)", "training RMSE (nm)"], rungs))
     parts.append("<h2>Findings</h2><ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in findings(st)) + "</ul>")
     parts.append("<h2>Fit figures</h2>" + _table(
         ["", "n", "RMSE (nm)", "NRMSE (%)", "fit (%)", "bias (nm)", "max (nm)"],

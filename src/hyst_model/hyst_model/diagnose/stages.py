@@ -9,11 +9,13 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
 from ..errors import EffectError, FitError
 from ..effects import EFFECTS, compose
+from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from ..model import Model
 from .refit import Fixed, _effect_values, _simulate, guarded_refit, paired_t, refit, rmse
@@ -224,7 +226,8 @@ def refit_all(s: Setup, cands: dict, carry: dict, full: dict) -> list:
     return sorted(cands.values(), key=lambda c: (not c.significant, c.rmse))
 
 
-def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict) -> tuple[list, dict, list]:
+def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
+          ) -> tuple[list, dict[str, tuple[Model, np.ndarray]], list]:
     """Stage 3: the error ladder — the best significant effect, then, while the error is above the noise floor,
     the best further effect screened on top of the current rung and refitted (``full_rate_top`` of them).
 
@@ -232,7 +235,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict) -> tuple
     """
     t, u, y, val, train = s.t, s.u, s.y, s.val, s.train
     ladder = [Rung(s.base, [], s.base_val, rmse(s.e_base[train]))]
-    models: dict[str, tuple] = {s.base: (s.base_model, s.th_base)}
+    models: dict[str, tuple[Model, np.ndarray]] = {s.base: (s.base_model, s.th_base)}
     chosen: list[str] = []
     if not (ranked and ranked[0].significant):
         return ladder, models, chosen
@@ -249,6 +252,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict) -> tuple
         # A second effect is often masked by the first when tested alone: screen every remaining one on top of
         # the current rung, then refit the best at full rate.
         prev_m, prev_th = models[ladder[-1].model]
+        prev_c = cast(ComposedModel, prev_m)  # every rung above the base is a refitted composed model
         trial_s = []
         for nm in s.names:
             if nm in chosen:
@@ -268,7 +272,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict) -> tuple
             try:
                 mm, tth, yh = guarded_refit(s.base_model, chosen + [nm], s.cfg, t, u, y, val,
                                             {**prev_m.unpack(prev_th), **vals},
-                                            theta_base=prev_m.split(prev_th)[0],
+                                            theta_base=prev_c.split(prev_th)[0],
                                             carry=_effect_values(prev_m, prev_th), fitter=s.fit, prior=vals)
             except (EffectError, FitError):
                 continue
@@ -290,8 +294,8 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict) -> tuple
     return ladder, models, chosen
 
 
-def verdict(s: Setup, cands: dict, ladder: list, models: dict, chosen: list, unexplained_factor: float,
-            explain: Callable) -> tuple[list, str, Unexplained | None, str]:
+def verdict(s: Setup, cands: dict, ladder: list, models: dict[str, tuple[Model, np.ndarray]], chosen: list,
+            unexplained_factor: float, explain: Callable) -> tuple[list, str, Unexplained | None, str]:
     """Stage 4: the answer — candidates best first, the missing effect (``none``/``unexplained`` included),
     the description of an unexplained remainder, and the explanation in words.
 
@@ -308,7 +312,8 @@ def verdict(s: Setup, cands: dict, ladder: list, models: dict, chosen: list, une
     left = ladder[-1].rmse
     unexplained = None
     if left >= unexplained_factor * noise:
-        e_last = s.y - _simulate(*models[ladder[-1].model], s.t, s.u)
+        m_last, th_last = models[ladder[-1].model]
+        e_last = s.y - _simulate(m_last, th_last, s.t, s.u)
         # Learn the loop-shape function on the first half of the held-out samples, test it on the second: both
         # halves are out of sample for the model (its training residual is fitted away and says little).
         vi = np.flatnonzero(s.val)

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -80,14 +80,15 @@ class Effect:
         ``y_scale`` (m per model unit), plus any effect-specific keys ``<name>.<key>`` it wrote itself.
     """
 
-    name: ClassVar[str] = "effect"
-    summary: ClassVar[str] = ""
-    physics: ClassVar[str] = ""
-    kind: ClassVar[str] = "output"
+    # Class attributes, not ClassVar: a wrapper (compose.Frozen) copies them from the effect it wraps per instance.
+    name: str = "effect"
+    summary: str = ""
+    physics: str = ""
+    kind: str = "output"
     #: Effects this one must not be combined with (same physics twice → unidentifiable).
-    conflicts: ClassVar[tuple[str, ...]] = ()
+    conflicts: tuple[str, ...] = ()
     #: Base model names this effect applies to; empty = any.
-    bases: ClassVar[tuple[str, ...]] = ()
+    bases: tuple[str, ...] = ()
     #: Base parameters a kind-``base`` effect still reads (None: all of them). An effect that replaces the
     #: base recursion outright lists only those it keeps (e.g. ``("offset",)``), so fitters skip the rest.
     base_params_used: ClassVar[tuple[str, ...] | None] = None
@@ -95,7 +96,7 @@ class Effect:
     online_note: ClassVar[str] = "it has no per-sample form (Effect.online), so the controllers cannot compensate it"
 
     def __init__(self, config: Mapping[str, object] | None = None):
-        cfg = dict(config or {})
+        cfg: dict[str, Any] = dict(config or {})
         self.dt = float(cfg.get("dt", 1e-3) or 1e-3)
         self.u_scale = float(cfg.get("u_scale", 1.0) or 1.0)
         self.y_scale = float(cfg.get("y_scale", 1.0) or 1.0)
@@ -206,8 +207,8 @@ class ComposedModel(Model):
         if isinstance(base, ComposedModel):  # flatten so .base is always the innermost model
             effects = list(base.effects) + list(effects)
             base = base.base
-        self.base = base
-        self.effects = list(effects)
+        self.base: Model = base
+        self.effects: list[Effect] = list(effects)
         for i, e in enumerate(self.effects):
             e.check(base, self.effects[:i])
         bases = [e for e in self.effects if e.kind == "base"]
@@ -215,7 +216,7 @@ class ComposedModel(Model):
             raise EffectError(f"effects {bases[0].name!r} and {bases[1].name!r} both replace the base model")
         self.name = "+".join([base.name] + [e.name for e in self.effects])
         ps = list(base.params())
-        self._slices = []
+        self._slices: list[slice] = []
         n0 = len(ps)
         start = n0
         for e in self.effects:
@@ -250,9 +251,10 @@ class ComposedModel(Model):
         tb, tes = self.split(theta)
         base = self.base
         order = sorted(range(len(self.effects)), key=lambda i: self.effects[i].kind != "base")
-        def f(tt: np.ndarray, uu: np.ndarray) -> np.ndarray:
+        def base_simulate(tt: np.ndarray, uu: np.ndarray) -> np.ndarray:
             return base.simulate(tb, tt, uu)
 
+        f: Callable[[np.ndarray, np.ndarray], np.ndarray] = base_simulate
         for i in order:
             f = _bind(self.effects[i], tes[i], Inner(f, base, tb))
         return f(np.asarray(t, dtype=np.float64), np.asarray(u, dtype=np.float64))

@@ -9,9 +9,12 @@ from __future__ import annotations
 import importlib
 from collections.abc import Mapping, Sequence
 
+import numpy as np
+from numpy.typing import ArrayLike
+
 from ..errors import EffectError
-from ..model import Model
-from .base import ComposedModel, Effect
+from ..model import Model, Param
+from .base import ComposedModel, Effect, Inner
 
 __all__ = ["EFFECTS", "compose", "register", "effect_names", "Frozen", "effects_data_config"]
 
@@ -47,7 +50,8 @@ def effect_names() -> list[str]:
     return sorted(EFFECTS)
 
 
-def compose(model: Model, names: Sequence[str | Effect], config: Mapping[str, object] | None = None) -> Model:
+def compose(model: Model, names: Sequence[str | Effect],
+            config: Mapping[str, object] | None = None) -> ComposedModel:
     """Extend ``model`` by the named effects, first name innermost; returns a :class:`ComposedModel`.
 
     Parameters
@@ -66,7 +70,7 @@ def compose(model: Model, names: Sequence[str | Effect], config: Mapping[str, ob
         Unknown name, an effect listed twice, two effects modelling the same physics, or an effect that does
         not apply to this base model.
     """
-    cfg = dict(model.config())
+    cfg: dict[str, object] = dict(model.config())
     cfg.update(dict(config or {}))
     effects: list[Effect] = []
     for n in names:
@@ -113,8 +117,7 @@ class Frozen(Effect):
     basin. Fitting the base with the effect frozen first, then everything jointly, avoids that.
     """
 
-    def __init__(self, effect: Effect, theta):
-        import numpy as np
+    def __init__(self, effect: Effect, theta: ArrayLike):
         super().__init__(getattr(effect, "_config", {}))
         self.effect = effect
         self.theta = np.asarray(theta, dtype=np.float64)
@@ -125,20 +128,21 @@ class Frozen(Effect):
         self.summary = effect.summary
         self.physics = effect.physics
 
-    def params(self):
+    def params(self) -> tuple[Param, ...]:
         return ()
 
-    def config(self):
+    def config(self) -> dict[str, float | str]:
         return self.effect.config()
 
-    def apply(self, theta, t, u, inner):
+    def apply(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray, inner: Inner) -> np.ndarray:
         return self.effect.apply(self.theta, t, u, inner)
 
-    def check(self, base, others):
+    def check(self, base: Model, others: Sequence[Effect]) -> None:
         self.effect.check(base, others)
 
 
-def effects_data_config(names: Sequence[str], t, u, y, scored) -> dict:
+def effects_data_config(names: Sequence[str], t: np.ndarray, u: np.ndarray, y: np.ndarray,
+                        scored: np.ndarray) -> dict:
     """The configuration each named effect takes from the record (:meth:`Effect.data_config`), merged."""
     out: dict = {}
     for n in names:

@@ -51,7 +51,7 @@ class Delay(Effect):
         """Configurations ``hyst diagnose`` tries, keeping whichever validates better: both sides."""
         return [{"delay.side": s} for s in SIDES]
 
-    def config(self) -> dict[str, str]:
+    def config(self) -> dict[str, float | str]:
         return {"side": self.side}
 
     def screen_with_refit(self) -> bool:

@@ -10,10 +10,12 @@ import hashlib
 import importlib.util
 import sys
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
 from ..errors import EffectError
+from ..model import Model
 from .base import Effect
 from .compose import register
 
@@ -59,7 +61,7 @@ def load_effect_module(path: str | Path) -> list[str]:
     from . import EFFECTS
     names = []
     for cls in classes:
-        have = EFFECTS.get(getattr(cls, "name", None))
+        have = EFFECTS.get(cls.name)  # an Effect subclass always has one (Effect.name at least)
         if have is not None and have.__module__.startswith("hyst_model.effects."):
             # a user file must not silently replace a built-in (its params files would change meaning)
             raise EffectError(f"effect module {p}: {cls.__name__} is named {cls.name!r}, a built-in effect; "
@@ -134,7 +136,10 @@ def _check(path: Path, cls: type[Effect]) -> None:
         if cls.kind == "base":  # replaces a real base model's recursion; checked when composed
             return
         base = _Identity()
-        y = eff.apply(theta, t, u, Inner(lambda tt, uu: base.simulate((), tt, uu), base, np.empty(0)))
+        # the stand-in offers the Model methods the check's effects (not kind base) read: name, params, config,
+        # simulate
+        inner = Inner(lambda tt, uu: base.simulate((), tt, uu), cast(Model, base), np.empty(0))
+        y = eff.apply(theta, t, u, inner)
         y = np.asarray(y, dtype=np.float64)
         if y.shape != u.shape or not np.all(np.isfinite(y)):
             raise ValueError(f"simulate returned shape {y.shape} / non-finite values for its default parameters")

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Protocol, cast
 
 import numpy as np
 
@@ -20,6 +21,19 @@ def model_label(model: Model) -> str:
     if base is not None and effects:
         return "+".join([str(base.name)] + [str(getattr(e, "name", e)) for e in effects])
     return str(model.name)
+
+
+class _JacModel(Protocol):
+    """A model with output sensitivities (e.g. MBW/BW): ``(yhat, dyhat/dtheta)``."""
+
+    def simulate_jac(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+class _NormalModel(Protocol):
+    """A model with fused normal equations of the normalised training residuals (MBW)."""
+
+    def normal_equations(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray, a: int, y: np.ndarray,
+                         scale: float) -> tuple[np.ndarray, np.ndarray, float]: ...
 
 
 class TrainProblem:
@@ -82,9 +96,11 @@ class TrainProblem:
         return p
 
     def jac(self, theta: np.ndarray) -> np.ndarray:
+        """Jacobian of the normalised residuals (models with simulate_jac: used only when :attr:`has_jac`)."""
+        model = cast(_JacModel, self.model)
         self.n_eval += 1
         with np.errstate(all="ignore"):
-            _, J = self.model.simulate_jac(np.asarray(theta, dtype=np.float64), self.t, self.u)
+            _, J = model.simulate_jac(np.asarray(theta, dtype=np.float64), self.t, self.u)
         J = self._kept(J[self.a:]) / self.scale
         if not np.all(np.isfinite(J)):
             J = np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
@@ -92,9 +108,10 @@ class TrainProblem:
 
     def residuals_jac(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Normalised residuals and their Jacobian from one sensitivity simulation (models with simulate_jac)."""
+        model = cast(_JacModel, self.model)  # used only when has_jac
         self.n_eval += 1
         with np.errstate(all="ignore"):
-            yhat, J = self.model.simulate_jac(np.asarray(theta, dtype=np.float64), self.t, self.u)
+            yhat, J = model.simulate_jac(np.asarray(theta, dtype=np.float64), self.t, self.u)
         r = self._kept((yhat[self.a:] - self.y) / self.scale)
         J = self._kept(J[self.a:])
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
@@ -125,9 +142,10 @@ class TrainProblem:
     def normal_equations(self, theta: np.ndarray):
         """``(JᵀJ, Jᵀr, rᵀr)`` of the normalised residuals: fused (MBW) or from :meth:`residuals_jac`."""
         if self.has_normal:
+            model = cast(_NormalModel, self.model)  # has_normal: hasattr(model, "normal_equations")
             self.n_eval += 1
             with np.errstate(all="ignore"):
-                return self.model.normal_equations(np.asarray(theta, dtype=np.float64), self.t, self.u, self.a,
+                return model.normal_equations(np.asarray(theta, dtype=np.float64), self.t, self.u, self.a,
                                                    self.y, self.scale)
         from .lm import normal_from_jac
         fun = self.residuals_jac if self.has_jac else self.fd_residuals_jac
@@ -162,6 +180,7 @@ class Estimator:
     def __init__(self, model: Model, *, split=0.25, progress: Callable[[str], None] | bool | None = None):
         self.model = model
         self.split = split
+        self.progress: Callable[[str], None] | None
         if progress is True:
             import sys
             self.progress = lambda msg: print(msg, file=sys.stderr, flush=True)

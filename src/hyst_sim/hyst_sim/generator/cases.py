@@ -71,17 +71,19 @@ def _pi_simulator(v_min: float, v_max: float, stroke: float, rng: np.random.Gene
     return sim
 
 
-def _apply(forms, ctx: Ctx):
+def _apply(forms, ctx: Ctx, draws: dict[str, dict]):
     u, y = ctx.u, ctx.x
     for name, amp in forms:
-        c = Ctx(ctx.t, u, ctx.simulate, y, ctx.span, ctx.draws[name])
+        c = Ctx(ctx.t, u, ctx.simulate, y, ctx.span, draws[name])
         u, y = FORMS[name][0](c, amp)
     return u, y
 
 
-def _calibrate(name: str, ctx: Ctx, target: float) -> tuple[float, float]:
-    """Strength in (0, 1] whose RMS output change is ``target`` (m), by bisection; the size reached."""
-    c = Ctx(ctx.t, ctx.u, ctx.simulate, ctx.x, ctx.span, ctx.draws[name])
+def _calibrate(name: str, ctx: Ctx, draws: dict[str, dict], target: float) -> tuple[float, float]:
+    """Strength in (0, 1] whose RMS output change is ``target`` (m), by bisection; the size reached.
+
+    ``draws`` holds each form's private rng draw (by form name)."""
+    c = Ctx(ctx.t, ctx.u, ctx.simulate, ctx.x, ctx.span, draws[name])
 
     def size(a: float) -> float:
         return float(np.sqrt(np.mean((FORMS[name][0](c, a)[1] - ctx.x) ** 2)))
@@ -129,22 +131,23 @@ def generate_case(seed: int, kind: str | None = None) -> Case:
         u = excitation(exc, t, prof.v_min, prof.v_max, r2)
         x = simulate(u)
         ctx = Ctx(t, u, simulate, x, prof.stroke, {})
-        ctx.draws = draws
         return u, x, ctx, np.random.default_rng(noise_seed)
 
     u, x, ctx, nrng = record(int(seeds[0]), int(seeds[1]))
-    strengths, sizes = [], []
+    strengths: list[tuple[str, float]] = []
+    sizes: list[float] = []
     for f, tg in zip(forms, targets):
-        a, s = _calibrate(f, ctx, tg)
-        strengths.append((f, a))
+        amp, s = _calibrate(f, ctx, draws, tg)
+        strengths.append((f, amp))
         sizes.append(s / noise)
-    ua, y = _apply(strengths, ctx)
+    ua, y = _apply(strengths, ctx, draws)
     y = y + noise * nrng.standard_normal(t.size)
     # fresh record of the same stage: new noise; random excitations get a new realisation too
     fresh_u_seed = int(seeds[0]) if exc in ("triangles", "sweep") else int(seeds[2])
     uf, xf, ctxf, nrng_f = record(fresh_u_seed, int(seeds[2]) + 1)
-    _, yf = _apply(strengths, ctxf)
+    _, yf = _apply(strengths, ctxf, draws)
     yf = yf + noise * nrng_f.standard_normal(t.size)
+    expected: tuple[str, ...]
     if kind == "pi_truth":
         expected = ("pi_truth",)
     elif not forms:
