@@ -51,8 +51,12 @@ class PtyEmulator:
     def __init__(self, device: EmulatedDevice, link: str | None = None, rates: FaultRates | None = None,
                  seed: int = 0, timeout_s: float = 0.1, unplug_s: float = 0.1) -> None:
         self.device = device
-        self._tmpdir = None if link else tempfile.mkdtemp(prefix="hyst_emulator_")
-        self.link = link or os.path.join(self._tmpdir, "tty")
+        self._tmpdir: str | None = None
+        if link:
+            self.link = link
+        else:
+            self._tmpdir = tempfile.mkdtemp(prefix="hyst_emulator_")
+            self.link = os.path.join(self._tmpdir, "tty")
         self.rates = rates or FaultRates()
         self.rng = random.Random(seed)
         self.timeout_s, self.unplug_s = timeout_s, unplug_s

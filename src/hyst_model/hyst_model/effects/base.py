@@ -91,7 +91,7 @@ class Effect:
     bases: tuple[str, ...] = ()
     #: Base parameters a kind-``base`` effect still reads (None: all of them). An effect that replaces the
     #: base recursion outright lists only those it keeps (e.g. ``("offset",)``), so fitters skip the rest.
-    base_params_used: ClassVar[tuple[str, ...] | None] = None
+    base_params_used: tuple[str, ...] | None = None  # an instance may set it (the dynamics effect's feedback)
     #: Why the controllers cannot use this effect, shown when :meth:`online` returns None.
     online_note: ClassVar[str] = "it has no per-sample form (Effect.online), so the controllers cannot compensate it"
 

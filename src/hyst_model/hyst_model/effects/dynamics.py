@@ -306,7 +306,8 @@ def choose_structure(base, t: np.ndarray, u: np.ndarray, y: np.ndarray, *,
     """
     from .compose import compose
     if fit is None:
-        from ..identify import fit as fit
+        from ..identify import fit as default_fit
+        fit = default_fit
     results: dict[str, object] = {}
     rmse: dict[str, float] = {}
     for s in structures:
@@ -319,8 +320,8 @@ def choose_structure(base, t: np.ndarray, u: np.ndarray, y: np.ndarray, *,
         v = getattr(res, "rmse", None)
         if v is None or not np.isfinite(v):
             v = getattr(res, "rmse_train", np.inf)
-        rmse[s] = float(v)
-    best = min(rmse, key=rmse.get)
+        rmse[s] = float(v) if v is not None else float("inf")
+    best = min(rmse, key=lambda k: rmse[k])
     return StructureChoice(best, rmse, results)
 
 
