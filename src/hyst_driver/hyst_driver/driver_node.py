@@ -275,6 +275,10 @@ class DriverNode(AtomicParametersNode):
         if lat:
             kv.update({"latency_ms.p50": lat[len(lat) // 2] * 1e-6,
                        "latency_ms.p99": lat[int(0.99 * (len(lat) - 1))] * 1e-6, "latency_ms.max": lat[-1] * 1e-6})
+        app = sorted(self.link.limiter.apply_delays)  # write -> applied, by the device's read-back (s)
+        if app:
+            kv.update({"apply_ms.p50": app[len(app) // 2] * 1e3, "apply_ms.p95": app[int(0.95 * (len(app) - 1))] * 1e3,
+                       "apply_ms.max": app[-1] * 1e3})
         st.values = [KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v)) for k, v in kv.items()]
         arr = DiagnosticArray(status=[st])
         arr.header.stamp = self.get_clock().now().to_msg()

@@ -171,6 +171,10 @@ class VoltageLimiter:
         #: True when the last :meth:`step` found no admissible voltage: the caller must not write.
         self.hold = False
         self.track_flight = track_flight
+        #: Write → applied delays (s): a write's time to the sample time of the read-back that first showed it
+        #: applied, newest 2000. The whole downstream path (host write, serial link, the device's next sample),
+        #: measured by the device's own read-back: a link that delays commands shows here, not in the counters.
+        self.apply_delays: deque[float] = deque(maxlen=2000)
         self._reset_flight(self._k)
 
     # ------------------------------------------------------------ state
@@ -270,6 +274,8 @@ class VoltageLimiter:
         else:
             i = next((j for j, (kf, _) in enumerate(self._flight) if kf == k), -1)
             if i >= 0:  # FIFO: every write up to this one has arrived; only this one's value is left of them
+                if math.isfinite(t_sample):
+                    self.apply_delays.append(t_sample - self._flight[i][1])
                 for _ in range(i + 1):
                     self._flight.popleft()
                 self._base_k, self._odd = k, None

@@ -280,3 +280,19 @@ def test_seeded_outside_the_window_the_first_steps_are_judged_from_the_reported_
         out.append(lz.update(110.0, 1e-3))
         lz.sent(t * 1e-3)
     assert out[0] == 10.0 and max(out) <= 20.0  # into the window at once, then within 20 V of the 0 V applied
+
+
+def test_apply_delay_is_measured_by_the_read_back_and_only_when_the_sample_time_is_known():
+    """Write -> applied, judged by the device's own read-back: what a link that delays commands costs."""
+    lim = Limits(0.0, 150.0, slew_max=2e4, v_safe=0.0, dt_max=1e-3)
+    lz = VoltageLimiter(lim, 0.0)
+    lz.update(100.0, 1e-3)
+    lz.sent(0.010)                      # 20 V written
+    lz.observe(0.0, 0.0105)             # not applied yet: no delay recorded
+    assert list(lz.apply_delays) == []
+    lz.observe(20.0, 0.0132)            # applied at the sample taken 3.2 ms after the write
+    assert list(lz.apply_delays) == [pytest.approx(0.0032)]
+    lz.update(100.0, 1e-3)
+    lz.sent(0.020)
+    lz.observe(40.0, -math.inf)         # sample time unknown (a polled reply before the clock settled)
+    assert len(lz.apply_delays) == 1 and lz.confirmed == 40.0
