@@ -69,9 +69,10 @@ def test_stop_processes_signals_then_kills_what_ignores_the_signal():
                                  "signal.SIG_IGN)\nprint('up', flush=True)\ntime.sleep(600)"],
                                 stdout=subprocess.PIPE, text=True)
     assert polite.stdout.readline().strip() == "up" and stubborn.stdout.readline().strip() == "up"
-    codes = stop_processes([polite, stubborn], grace=2.0)
-    assert codes[0] == -2  # SIGINT reached it (Python exits by the signal after its KeyboardInterrupt)
-    assert codes[1] == -9  # ignored SIGINT: killed after the grace time
+    # generous grace for the one that stops (a loaded host took > 2 s); the other ignores SIGINT, so it is killed
+    # whatever the grace: nothing here depends on how fast the machine is
+    assert stop_processes([polite], grace=120.0) == [-2]  # SIGINT reached it (Python exits by the signal)
+    assert stop_processes([stubborn], grace=0.5) == [-9]  # ignored SIGINT: killed after the grace time
     assert polite.poll() is not None and stubborn.poll() is not None
     polite.stdout.close()
     stubborn.stdout.close()
