@@ -63,7 +63,9 @@ def test_own_args_are_those_before_ros_args():
 
 
 def test_stop_processes_signals_then_kills_what_ignores_the_signal():
-    polite = subprocess.Popen([sys.executable, "-c", "import sys, time\nprint('up', flush=True)\ntime.sleep(600)"],
+    # the handler set explicitly: a child of a background job inherits SIGINT ignored (make test-stress)
+    polite = subprocess.Popen([sys.executable, "-c", "import signal, time\nsignal.signal(signal.SIGINT, "
+                               "signal.default_int_handler)\nprint('up', flush=True)\ntime.sleep(600)"],
                               stdout=subprocess.PIPE, text=True)
     stubborn = subprocess.Popen([sys.executable, "-c", "import signal, time\nsignal.signal(signal.SIGINT, "
                                  "signal.SIG_IGN)\nprint('up', flush=True)\ntime.sleep(600)"],

@@ -44,6 +44,9 @@ Device → host
 
 Example: ``$SV,75000000*A5\\r\\n`` sets 75 V; ``$P,17,1017000,7500,75000000*07\\r\\n`` is a sample.
 Streaming at 1 kHz carries ~35 kB/s: use USB-CDC or at least 921600 baud on a UART.
+
+Length (~410 lines): the whole protocol — frame, CRC, every message's codec both ways and the line framer — in
+one file, so that the spec above and its byte-exact implementation are read together.
 """
 from __future__ import annotations
 

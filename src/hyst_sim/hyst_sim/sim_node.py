@@ -32,6 +32,9 @@ cannot follow, a diverging model) is an ERROR, never a number; clipping, timeout
 ``hyst_sim: timing`` — missed realtime periods with their share of the second (a WARN, an ERROR above 10 %). Parameter
 sets are all or nothing: :meth:`SimNode.set_parameters` and the node's ``set_parameters`` service (rclpy's sets each
 parameter alone) validate the whole resulting configuration and apply every parameter or none.
+
+Length (~450 lines): one node class; its settings (``sim_settings.py``) and plant (``plant.py``) are apart, and
+what remains — the two sampling modes, the command path, diagnostics — shares the node's state and its locks.
 """
 from __future__ import annotations
 
