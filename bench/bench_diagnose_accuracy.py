@@ -4,7 +4,7 @@ For each generated case: ``diagnose`` on the record, then the error on a *fresh*
 noise; random excitations re-drawn) of the base model and of the diagnosed model, and — for library effects —
 of the base refitted with the TRUE effect names (can adding the right effect cut the error at all?).
 
-Usage: ``python bench/bench_diagnose_accuracy.py [--n 200] [--seed 1] [--jobs 2] [--json OUT]``; from
+Usage: ``python bench/bench_diagnose_accuracy.py [--n 200] [--seed 1] [--jobs 2] [--json OUT] [--kinds pair]``; from
 ``bench/run_all.py`` (``make bench``) it runs a quick 24-case family. Prints the confusion matrix (expected vs
 named first), top-1 rates by size band, pairs both in the top two, false alarms on none, what the
 outside-library and Prandtl–Ishlinskii cases got, the error fall on the fresh record, time per case and the
@@ -142,11 +142,18 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--seed", type=int, default=1, help="family seed (cases use seed*100000 + i)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--json", metavar="OUT", help="write per-case results")
+    ap.add_argument("--kinds", default=None,
+                    help="only these kinds, comma-separated (e.g. pair): the same cases as in the full family")
     a = ap.parse_args(["--n", "24"] if argv is None else argv)
     from hyst_sim.generator.cases import KINDS  # noqa: F401 - fail early if the generator is missing
     weights = {"single_large": 4, "single_small": 2, "pair": 2, "outside": 1, "none": 2, "pi_truth": 1}
     order = [k for k, w in weights.items() for _ in range(w)]
     jobs = [(a.seed * 100000 + i, order[i % len(order)]) for i in range(a.n)]
+    if a.kinds:
+        wanted = set(a.kinds.split(","))
+        if not wanted <= set(weights):
+            ap.error(f"--kinds: unknown {sorted(wanted - set(weights))}; known: {', '.join(weights)}")
+        jobs = [j for j in jobs if j[1] in wanted]
     if a.jobs > 1:
         from multiprocessing import get_context
         with get_context("spawn").Pool(a.jobs) as pool:
