@@ -188,7 +188,7 @@ def main(args=None) -> int:
         except BaseException:
             writer.close()
             raise
-        made.update(node=node, writer=writer, out=out)
+        made.update(node=node, out=out)
         print(f"hyst_bag_record: recording -> {out}", flush=True)
         return node
 
@@ -207,7 +207,8 @@ def main(args=None) -> int:
             signal.signal(sig, signal.SIG_IGN)
     if "node" not in made:
         return code
-    node, writer = made["node"], made["writer"]
+    node = made["node"]
+    writer = node.writer
     lost = f", {node.write_errors} write error(s)" if node.write_errors else ""
     print(f"hyst_bag_record: {writer.count} messages on {len(writer.topics)} topic(s) -> {made['out']}{lost}")
     return 1 if lost and code == 0 else code
