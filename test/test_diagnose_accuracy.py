@@ -23,6 +23,13 @@ def _run(i: int, kind: str) -> dict:
     return mod.run_case((FAMILY * 100000 + i, kind))
 
 
+def _noise_margin() -> float:
+    """diagnose's own margin: a base within it of the noise floor is answered 'none'."""
+    import inspect
+    from hyst_model.diagnose.diagnose import diagnose
+    return float(inspect.signature(diagnose).parameters["noise_margin"].default)
+
+
 @pytest.mark.parametrize("i", [0, 1, 2])
 def test_no_false_alarm_on_none(i):
     r = _run(i, "none")
@@ -35,7 +42,7 @@ def test_a_large_error_is_never_a_bare_none(i, kind):
     r = _run(i, kind)
     if r["base_over_noise"] >= UNEXPLAINED_FACTOR:
         assert r["named"][0] != "none" and (r["missing"] == "unexplained" or r["unexplained"] is not None), r
-    elif r["base_over_noise"] <= 1.25:
+    elif r["base_over_noise"] <= _noise_margin():
         assert r["named"] == ["none"], r
 
 

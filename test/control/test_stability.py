@@ -116,3 +116,24 @@ def test_no_instability_at_default_settings_on_a_resonant_stage(algorithm, fn, z
     e = np.abs(out.error)
     half = e.size // 2
     assert e[half:].max() <= 1.5 * e[:half].max() + 20e-9  # bounded, not growing
+
+
+def test_a_mode_only_part_of_the_motion_passes_is_checked_as_such():
+    """The participation enters the loop: (1 − p) + p·G(q) — p = 1 is the plain resonance, p = 0 none, and a
+    partial mode threatens the default gains no more than the whole one."""
+    from hyst_control.stability import resonance_tf
+    full, half, none = (Resonance(350.0, 0.04, p) for p in (1.0, 0.5, 0.0))
+    nf, df = resonance_tf(full, DT)
+    nh, dh = resonance_tf(half, DT)
+    nn, dn = resonance_tf(none, DT)
+    z = np.exp(1j * 2 * np.pi * 350.0 * DT)  # at the resonance, q = z⁻¹
+    g = [np.polyval(n[::-1], 1 / z) / np.polyval(d[::-1], 1 / z) for n, d in ((nf, df), (nh, dh), (nn, dn))]
+    assert abs(g[2] - 1.0) < 1e-12
+    assert abs(g[1] - (0.5 + 0.5 * g[0])) < 1e-9
+    m = pea_default()
+    g0 = make_controller("dppc", m, DT).gains
+    assert check_loop("dppc", g0, m, DT, half).spectral_radius <= \
+        check_loop("dppc", g0, m, DT, full).spectral_radius + 1e-9
+    from hyst_control.errors import ConfigError
+    with pytest.raises(ConfigError):
+        Resonance(350.0, 0.04, 1.5)

@@ -154,6 +154,8 @@ def plan_compensation(model: MBWParams, effects: Sequence[str], values: Mapping[
         raise ConfigError(f"the model with effects {', '.join(effects)} is not a composed model")
     for e in composed.effects:
         names = [p.name for p in e.params()]
+        # a parameter added after the file was written reads as the value that keeps the older behaviour
+        values = {**{f"{e.name}.{k}": v for k, v in e.legacy_values().items()}, **values}
         missing = [n for n in names if f"{e.name}.{n}" not in values]
         if missing:
             raise ConfigError(f"effect {e.name}: parameter(s) {', '.join(e.name + '.' + n for n in missing)} "

@@ -57,14 +57,18 @@ class StabilityError(ConfigError):
 
 @dataclass(frozen=True)
 class Resonance:
-    """Stage resonance of the ``dynamics`` effect: natural frequency ``fn`` (Hz), damping ratio ``zeta``."""
+    """Stage resonance of the ``dynamics`` effect: natural frequency ``fn`` (Hz), damping ratio ``zeta`` and the
+    participation ``part`` (share of the displacement through the mode; 1 = all of it)."""
 
     fn: float
     zeta: float
+    part: float = 1.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fn) and self.fn > 0 and math.isfinite(self.zeta) and self.zeta > 0):
             raise ConfigError("a resonance needs fn > 0 Hz and zeta > 0")
+        if not (math.isfinite(self.part) and 0.0 <= self.part <= 1.0):
+            raise ConfigError("a resonance's participation must lie in [0, 1]")
 
 
 def identified_resonance(effects, values) -> Resonance | None:
@@ -73,7 +77,8 @@ def identified_resonance(effects, values) -> Resonance | None:
     if "dynamics" not in effects:
         return None
     fn, zeta = values.get("dynamics.fn"), values.get("dynamics.zeta")
-    return Resonance(float(fn), float(zeta)) if fn and zeta else None
+    part = values.get("dynamics.part", 1.0)  # files from before the participation: the whole motion
+    return Resonance(float(fn), float(zeta), float(part)) if fn and zeta else None
 
 
 @dataclass(frozen=True)
@@ -117,9 +122,11 @@ class StabilityVerdict:
 
 # -- transfer functions (coefficient arrays in q = z⁻¹, index = power) ---------------------------------------
 def resonance_tf(res: Resonance, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """ZOH-discretised ω²/(s² + 2ζωs + ω²) with the MBW's timing (y_k responds to the x_k held over period k).
+    """ZOH-discretised ω²/(s² + 2ζωs + ω²) with the MBW's timing (y_k responds to the x_k held over period k),
+    the share ``1 − part`` passing directly.
 
-    s_k = Φ s_{k−1} + Γ x_k, y_k = s_k[0] ⇒ G(q) = [Γ1 + (Φ12Γ2 − Φ22Γ1) q] / [1 − tr Φ·q + det Φ·q²].
+    s_k = Φ s_{k−1} + Γ x_k, y_k = s_k[0] ⇒ G(q) = [Γ1 + (Φ12Γ2 − Φ22Γ1) q] / [1 − tr Φ·q + det Φ·q²];
+    with participation p the reading is (1 − p) + p·G(q).
     """
     w = 2.0 * math.pi * res.fn
     m = np.zeros((3, 3))
@@ -129,6 +136,9 @@ def resonance_tf(res: Resonance, dt: float) -> tuple[np.ndarray, np.ndarray]:
     phi, gam = e[:2, :2], e[:2, 2]
     num = np.array([gam[0], phi[0, 1] * gam[1] - phi[1, 1] * gam[0]])
     den = np.array([1.0, -np.trace(phi), np.linalg.det(phi)])
+    p = float(res.part)
+    if p != 1.0:
+        num = np.array([p * num[0], p * num[1], 0.0]) + (1.0 - p) * den
     return num, den
 
 

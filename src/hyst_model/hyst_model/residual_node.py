@@ -159,7 +159,9 @@ class ResidualNode(AtomicParametersNode):
         base, effects = self._spec_names(changes)
         cfg = self._config(changes)
         model = build_model(base, effects, cfg)
-        missing = [n for n in model.names if f"model.{n}" not in self._model_keys]
+        legacy: dict[str, float] = getattr(model, "legacy_values", dict)()  # added since older files were written
+        cfg = {**{k: v for k, v in legacy.items() if f"model.{k}" not in self._model_keys}, **cfg}
+        missing = [n for n in model.names if f"model.{n}" not in self._model_keys and n not in legacy]
         if missing:
             raise HystError(f"model {model.name} needs parameters {', '.join(missing)} that were not declared at "
                             "start-up; restart the node with the new params file")

@@ -53,7 +53,8 @@ def test_series_filter_dc_overshoot_and_resonance():
 
 def test_series_defaults_are_almost_identity_on_slow_input():
     eff = DynamicsEffect({"dt": 5e-4})
-    fn, zeta = (p.default for p in eff.params())
+    fn, zeta, part = (p.default for p in eff.params())
+    assert part == 1.0  # the whole motion through the mode, as params files before the participation meant
     t = np.arange(4000) * 5e-4
     x = np.sin(2 * np.pi * 1.0 * t)
     # what is left is the time lag 2ζ/ωn (0.28 ms at 2 kHz): 0.18 % of a 1 Hz sine's amplitude
@@ -161,7 +162,7 @@ def test_series_structure_wraps_the_inner_model():
     base = build_model("mbw", [], cfg)
     model = build_model("mbw", ["dynamics"], cfg)
     tb = base.theta0
-    theta = np.concatenate([tb, [20.0, 0.1]])
+    theta = np.concatenate([tb, [20.0, 0.1, 1.0]])
     t = np.arange(3000) * 1e-3
     u = 75 + 75 * np.sin(2 * np.pi * 5 * t)
     yb = base.simulate(tb, t, u)
@@ -170,6 +171,35 @@ def test_series_structure_wraps_the_inner_model():
     foh = build_model("mbw", ["dynamics"], {**cfg, "dynamics.hold": "foh"})
     assert np.allclose(foh.simulate(theta, t, u), series_filter(yb, 20.0, 0.1, 1e-3, "foh"))
     assert not np.allclose(foh.simulate(theta, t, u), model.simulate(theta, t, u), rtol=0, atol=1e-9)
+    # a mode only part of the motion passes: the reading is (1 − part)·x + part·(mode output)
+    theta[-1] = 0.3
+    ym = series_filter(yb, 20.0, 0.1, 1e-3, "zoh")
+    assert np.allclose(model.simulate(theta, t, u), 0.7 * yb + 0.3 * ym)
+
+
+def test_series_start_finds_the_participation_of_a_partial_mode():
+    """The data-driven start fits the participation by least squares for each (fn, ζ) on its grid."""
+    dt = 5e-4
+    t = np.arange(8000) * dt
+    rng = np.random.default_rng(3)
+    x = np.repeat(rng.uniform(-1e-6, 1e-6, 80), 100)  # held steps: the mode rings after each
+    y = x + 0.35 * (series_filter(x, 180.0, 0.03, dt, "zoh") - x)
+    st = DynamicsEffect({"dt": dt}).start(t, x, y, y - x)
+    assert st["part"] == pytest.approx(0.35, abs=0.1)
+    assert st["fn"] == pytest.approx(180.0, rel=0.15)
+
+
+def test_params_file_without_the_participation_reads_as_the_whole_mode(tmp_path):
+    """A params file written before dynamics.part existed still loads, as the whole motion through the mode."""
+    from hyst_model.io.params_file import read_params, write_params, spec_from_model
+    cfg = {"dt": 1e-3, "u_scale": 15.0, "y_scale": 5e-6}
+    model = build_model("mbw", ["dynamics"], cfg)
+    theta = np.concatenate([model.base.theta0, [20.0, 0.1, 1.0]])
+    spec = spec_from_model(model, theta)
+    del spec.values["dynamics.part"]
+    write_params(tmp_path / "old.yaml", spec)
+    old = read_params(tmp_path / "old.yaml")
+    assert np.array_equal(old.theta(model), theta)
 
 
 def test_zoh_series_is_exact_for_a_held_step():

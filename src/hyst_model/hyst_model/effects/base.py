@@ -111,6 +111,11 @@ class Effect:
         """Non-fitted settings to store in a params file as ``<name>.<key>`` (none by default)."""
         return {}
 
+    def legacy_values(self) -> dict[str, float]:
+        """Parameters added after params files were written, with the value that gives the older behaviour
+        (local names): a file that lacks one of them is read with that value (none by default)."""
+        return {}
+
     # --- how it transforms --------------------------------------------------------------------------------
     def input(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Input-side effects: the input the inner model actually sees (V)."""
@@ -258,6 +263,10 @@ class ComposedModel(Model):
         for i in order:
             f = _bind(self.effects[i], tes[i], Inner(f, base, tb))
         return f(np.asarray(t, dtype=np.float64), np.asarray(u, dtype=np.float64))
+
+    def legacy_values(self) -> dict[str, float]:
+        """Namespaced :meth:`Effect.legacy_values` of every effect."""
+        return {f"{e.name}.{k}": v for e in self.effects for k, v in e.legacy_values().items()}
 
     def config(self) -> dict[str, float | str]:
         cfg = dict(self.base.config())

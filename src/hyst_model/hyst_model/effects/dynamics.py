@@ -4,9 +4,20 @@ meets.
 ``series`` (config ``dynamics.structure: series``, the default) — hysteresis followed by the stage's resonance:
 the inner model's output ``x`` drives a unit-DC-gain second-order low-pass
 
-    ÿ + 2ζω_n ẏ + ω_n² y = ω_n² x,     ω_n = 2π·fn,
+    ÿ_m + 2ζω_n ẏ_m + ω_n² y_m = ω_n² x,     ω_n = 2π·fn,      y = (1 − part)·x + part·y_m,
 
-discretised exactly, starting at rest at ``x[0]``, for one of two inputs between samples (``dynamics.hold``):
+where ``part`` is the mode's participation at the sensor (modal superposition: the share of the static
+displacement that passes through this mode; the rest reaches the sensor without it, as when the sensor sits
+between a stiff and a compliant part of the flexure). ``part = 1`` (the default, and what a params file written
+before the parameter existed means) is the whole motion through the mode. With ``part < 1`` the reading has a
+lightly damped anti-resonance above the resonance (zeros at ω_n/√(1 − part)), minimum phase, so the
+controllers' inverse stays stable. The damping ratio is bounded by 1 — a resonance, not an overdamped lag: two
+real poles with a partial participation are two first-order lags with a static share, which is what creep looks
+like (that is ``creep``'s job; with ζ allowed up to 3 the mode took 6 of 13 generated creep records); for
+the same reason its resonance lies above creep's time scales (:data:`SERIES_FN_MIN`, 15.9 Hz).
+
+The mode is discretised exactly, starting at rest at ``x[0]``, for one of two inputs between samples
+(``dynamics.hold``):
 
 * ``zoh`` (default) — the input is held over each sample period, as a DAC-driven amplifier holds the voltage:
   ``s_k = Φ s_{k−1} + Γ x_k``; sample ``k`` reads the stage at the end of the period over which ``x_k`` was held,
@@ -71,6 +82,11 @@ __all__ = ["DynamicsEffect", "series_filter", "msd_bw_simulate", "upsample", "ch
 
 STRUCTURES = ("series", "feedback")
 
+#: Lowest resonance of the series structure (Hz): the fastest creep lag's corner, 1/(2π·10 ms). Slower, a mode
+#: with a partial participation is a lag with a static share — creep's time scales, which ``creep`` models; with
+#: the old 0.2 Hz floor a 2-4 Hz mode with 1-3 % participation took creep records whose input had no holds.
+SERIES_FN_MIN = float(1.0 / (2.0 * np.pi * 0.01))
+
 #: The Bouc-Wen benchmark system (Noël & Schoukens 2016, Table 1) in this effect's ``feedback`` parameters.
 BENCHMARK_TRUTH: dict[str, float] = {
     "fn": float(np.sqrt(1e5 / 2.0) / (2 * np.pi)),  # 35.59 Hz
@@ -122,6 +138,10 @@ class DynamicsEffect(Effect):
         return {"structure": self.structure, "hold": self.hold, "substeps": float(self.substeps),
                 "interp": self.interp}
 
+    def legacy_values(self) -> dict[str, float]:
+        # params files from before the participation existed: the whole motion passes the mode
+        return {"part": 1.0} if self.structure == "series" else {}
+
     @staticmethod
     def variants() -> list[dict[str, str]]:
         """Configurations ``hyst diagnose`` tries, keeping whichever validates better: both structures."""
@@ -131,8 +151,10 @@ class DynamicsEffect(Effect):
         fs = 1.0 / self.dt
         nyq = 0.49 * fs
         if self.structure == "series":
-            return (Param("fn", 0.4 * fs, 0.2, nyq, "Hz", "natural frequency of the stage after the hysteresis"),
-                    Param("zeta", 0.7, 1e-3, 3.0, "", "damping ratio of that resonance"))
+            return (Param("fn", 0.4 * fs, SERIES_FN_MIN, nyq, "Hz",
+                          "natural frequency of the stage after the hysteresis"),
+                    Param("zeta", 0.7, 1e-3, 1.0, "", "damping ratio of that resonance (≤ 1: a resonance)"),
+                    Param("part", 1.0, 0.0, 1.0, "", "participation: share of the displacement through the mode"))
         gref = self.y_scale / self.u_scale
         yref = 10.0 * self.y_scale
         return (Param("fn", 0.05 * fs, 0.2, nyq, "Hz", "small-signal natural frequency sqrt((k+α)/m)/2π"),
@@ -170,7 +192,9 @@ class DynamicsEffect(Effect):
         if self.structure == "series":
             x = np.asarray(inner(t, u), dtype=np.float64)
             dt = sample_time(t) if t.size > 1 else self.dt
-            return series_filter(x, float(theta[0]), float(theta[1]), dt, self.hold)
+            ym = series_filter(x, float(theta[0]), float(theta[1]), dt, self.hold)
+            part = float(theta[2])
+            return ym if part == 1.0 else x + part * (ym - x)
         offset = 0.0
         try:
             offset = float(inner.model.unpack(inner.theta).get("offset", 0.0))
@@ -187,7 +211,7 @@ class DynamicsEffect(Effect):
     def online(self, theta, base=None):
         if self.structure != "series" or self.hold != "zoh" or base is None:
             return None
-        return SeriesResonanceInverse(float(theta[0]), float(theta[1]), self.dt, base)
+        return SeriesResonanceInverse(float(theta[0]), float(theta[1]), self.dt, base, float(theta[2]))
 
     # identification helpers -----------------------------------------------------------------------------
     def start(self, t, u, y, residual):
@@ -195,20 +219,27 @@ class DynamicsEffect(Effect):
         y = np.asarray(y, dtype=np.float64)
         dt = sample_time(t)
         fs = 1.0 / dt
-        grid = np.geomspace(max(0.5, 2.0 / (t[-1] - t[0] + dt)), 0.45 * fs, 24)
+        lo = SERIES_FN_MIN if self.structure == "series" else max(0.5, 2.0 / (t[-1] - t[0] + dt))
+        grid = np.geomspace(lo, 0.45 * fs, 24)
         peak = residual_peak(np.asarray(u, dtype=np.float64), np.asarray(residual, dtype=np.float64), dt)
-        if peak is not None:  # the resonance the residual shows, so a lightly damped one is not missed
+        if peak is not None and peak >= lo:  # the resonance the residual shows, so a lightly damped one is not missed
             grid = np.sort(np.r_[grid, peak])
         zetas = (0.01, 0.05, 0.2, 0.7)
         if self.structure == "series":
             x = y - np.asarray(residual, dtype=np.float64)  # the inner model's output
             best = (np.inf, None)
+            ex = y - x
             for fn in grid:
                 for z in zetas:
-                    r = y - series_filter(x, fn, z, dt, self.hold)
+                    d = series_filter(x, fn, z, dt, self.hold) - x  # what the whole mode adds to the reading
+                    den = float(d @ d)
+                    if not (np.isfinite(den) and den > 0):
+                        continue
+                    part = float(np.clip((d @ ex) / den, 0.0, 1.0))  # least squares, within the bounds
+                    r = ex - part * d
                     c = float(r @ r)
                     if np.isfinite(c) and c < best[0]:
-                        best = (c, {"fn": float(fn), "zeta": float(z)})
+                        best = (c, {"fn": float(fn), "zeta": float(z), "part": part})
             return best[1] or {}
         # feedback: the linear MSD (bg = bd = 0) with the compliance fitted by least squares, per (fn, ζ).
         u = np.asarray(u, dtype=np.float64)
@@ -335,15 +366,21 @@ class SeriesResonanceInverse(OnlineEffect):
       dynamics are stable where the sampled zero lies inside the unit circle (refused otherwise);
     * measure: a Smith predictor, y + x̂ − H x̂ with x̂ the base model driven by the applied input, so the law
       sees the stage without its resonance plus every model error (no inverse filter on sensor noise).
+
+    With a participation ``part`` < 1 the reading is (1 − part)·x + part·(mode output): the direct share adds
+    (1 − part) to the feed-through (x_k = (r_k − part·(Φ s_{k−1})_0) / ((1 − part) + part·Γ_0)) and the
+    predictor subtracts part·(H x̂ − x̂).
     """
 
     name = "dynamics"
 
-    def __init__(self, fn: float, zeta: float, dt: float, base) -> None:
+    def __init__(self, fn: float, zeta: float, dt: float, base, part: float = 1.0) -> None:
         self._phi, self._g, _ = _zoh_matrices(fn, zeta, dt)
-        if not abs(self._g[0]) > 1e-9:
+        self._part = float(part)
+        self._d = (1.0 - self._part) + self._part * float(self._g[0])  # feed-through of x_k to y_k
+        if not abs(self._d) > 1e-9:
             raise ValueError(f"a {fn:g} Hz resonance has no direct feed-through at dt = {dt:g} s")
-        zeros = np.linalg.eigvals(self._phi - np.outer(self._phi @ self._g, [1.0, 0.0]) / self._g[0])
+        zeros = np.linalg.eigvals(self._phi - self._part * np.outer(self._g, self._phi[0]) / self._d)
         if np.max(np.abs(zeros)) >= 0.999:
             raise ValueError(f"the {fn:g} Hz resonance's sampled zero lies on or outside the unit circle: "
                              "its inverse would diverge")
@@ -356,7 +393,7 @@ class SeriesResonanceInverse(OnlineEffect):
     def measure(self, y, u):
         x_hat = self._pred.step(u)
         self._s = self._phi @ self._s + self._g * x_hat
-        return y + x_hat - float(self._s[0])
+        return y + self._part * (x_hat - float(self._s[0]))
 
     def target(self, r, u):
-        return (r - float((self._phi @ self._s)[0])) / float(self._g[0])
+        return (r - self._part * float((self._phi @ self._s)[0])) / self._d

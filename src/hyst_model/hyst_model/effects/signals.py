@@ -6,10 +6,25 @@ import numpy as np
 __all__ = ["sample_time", "holds", "noise_floor", "smooth", "rate_of", "corr", "fmt_len"]
 
 
+_LAST_T: list = [None]  # one (time vector, its fingerprint, period) tuple; the vector kept alive keeps its id
+
+
 def sample_time(t: np.ndarray) -> float:
-    """Median sample period (s) of a time vector."""
+    """Median sample period (s) of a time vector.
+
+    A fit asks this of the same 10⁴–10⁵-sample record thousands of times (every effect, every simulation), so
+    the answer for the last vector is kept while it is the same, unchanged object (one tuple: read whole).
+    """
     t = np.asarray(t, dtype=np.float64)
-    return float(np.median(np.diff(t))) if t.size > 1 else 1e-3
+    if t.size <= 1:
+        return 1e-3
+    key = (t.size, float(t[0]), float(t[t.size // 2]), float(t[-1]))
+    snap = _LAST_T[0]
+    if snap is not None and snap[0] is t and snap[1] == key:
+        return float(snap[2])
+    dt = float(np.median(np.diff(t)))
+    _LAST_T[0] = (t, key, dt)
+    return dt
 
 
 def holds(u: np.ndarray, dt: float, min_seconds: float = 0.3, rel_tol: float = 2e-3) -> list[tuple[int, int, float]]:

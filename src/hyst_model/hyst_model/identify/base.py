@@ -71,6 +71,7 @@ class TrainProblem:
         parameters), a fresh evaluation count."""
         self.model = model
         self.n_eval = 0
+        self._last_r: tuple[bytes, np.ndarray] | None = None
         lo, hi = model.bounds
         self.lower, self.upper = lo.astype(np.float64), hi.astype(np.float64)
         self.has_jac = hasattr(model, "simulate_jac")
@@ -83,10 +84,21 @@ class TrainProblem:
             return np.asarray(self.model.simulate(np.asarray(theta, dtype=np.float64), self.t, self.u))[self.a:]
 
     def residuals(self, theta: np.ndarray) -> np.ndarray:
-        r = self._kept((self.simulate(theta) - self.y) / self.scale)
+        theta = np.asarray(theta, dtype=np.float64)
+        key = theta.tobytes()
+        if self._last_r is not None and self._last_r[0] == key:  # a cost just taken at the point LM accepts
+            return self._last_r[1]
+        with np.errstate(all="ignore"):  # a diverging trial point is penalised below, not warned about
+            r = self._kept((self.simulate(theta) - self.y) / self.scale)
         if not np.all(np.isfinite(r)):
-            return np.full(r.size, 1e3)
+            r = np.full(r.size, 1e3)
+        self._last_r = (key, r)
         return r
+
+    def sum_squares(self, theta: np.ndarray) -> float:
+        """rᵀr of the normalised residuals (a trial point's cost in :func:`~hyst_model.identify.lm.bounded_lm`)."""
+        from .lm import sum_squares
+        return float(sum_squares(np.ascontiguousarray(self.residuals(theta))))
 
     def for_model(self, model: Model) -> "TrainProblem":
         """The same record and windows for another model (e.g. the base of a composed model)."""

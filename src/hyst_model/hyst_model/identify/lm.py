@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-__all__ = ["LMResult", "bounded_lm", "normal_from_jac"]
+__all__ = ["LMResult", "bounded_lm", "normal_from_jac", "sum_squares"]
 
 
 @dataclass
@@ -48,6 +48,15 @@ def _normal_equations(J: np.ndarray, r: np.ndarray):
     return H, g, rr
 
 
+@njit(cache=True)
+def sum_squares(r: np.ndarray) -> float:
+    """rᵀr summed in order, as :func:`_normal_equations` sums it (a trial's cost compares with an accepted one's)."""
+    rr = 0.0
+    for k in range(r.size):
+        rr += r[k] * r[k]
+    return rr
+
+
 def normal_from_jac(fun_jac: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]):
     """Adapt ``x -> (r, J)`` to ``x -> (JᵀJ, Jᵀr, rᵀr)`` for :func:`bounded_lm`."""
     def fun_normal(x):
@@ -61,7 +70,8 @@ def normal_from_jac(fun_jac: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray
 
 def bounded_lm(fun_normal: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, float]], x0: np.ndarray,
                lower: np.ndarray, upper: np.ndarray, *, max_iter: int = 100, ftol: float = 1e-10,
-               xtol: float = 1e-10, lam0: float = 1e-3) -> LMResult:
+               xtol: float = 1e-10, lam0: float = 1e-3,
+               fun_cost: Callable[[np.ndarray], float] | None = None) -> LMResult:
     """Minimise ½‖r(x)‖² within ``[lower, upper]``.
 
     Parameters
@@ -71,7 +81,12 @@ def bounded_lm(fun_normal: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, 
     x0 : ndarray
         Start (clipped into the bounds).
     max_iter : int
-        Budget of trial points (each one evaluation of ``fun_normal``).
+        Budget of trial points (each one evaluation of ``fun_normal``, or of ``fun_cost`` when given).
+    fun_cost : callable, optional
+        ``x -> rᵀr`` alone. With it a trial point costs one residual evaluation and the normal equations are
+        formed only where a step is accepted: with a forward-difference Jacobian a rejected trial then costs one
+        simulation instead of p + 1. The iterates are the same as without it when ``fun_cost`` returns the rr
+        that ``fun_normal`` would (same summation order: :func:`sum_squares`).
     ftol, xtol : float
         Stop when the relative cost decrease or the step (relative to the bound span) falls below these.
     """
@@ -79,6 +94,8 @@ def bounded_lm(fun_normal: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, 
     upper = np.asarray(upper, dtype=np.float64)
     x = np.clip(np.asarray(x0, dtype=np.float64), lower, upper)
     H, g, rr = fun_normal(x)
+    if fun_cost is not None:
+        rr = fun_cost(x)
     nfev = 1
     if not np.isfinite(rr):
         return LMResult(x, np.inf, nfev, 0, -1, "start is not finite")
@@ -105,10 +122,15 @@ def bounded_lm(fun_normal: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, 
         step = np.zeros_like(x)
         step[free] = step_f
         x_new = np.clip(x + step, lower, upper)
-        H_new, g_new, rr_new = fun_normal(x_new)
+        if fun_cost is None:
+            H_new, g_new, rr_new = fun_normal(x_new)
+        else:
+            rr_new = fun_cost(x_new)
         nfev += 1
         c_new = 0.5 * rr_new if np.isfinite(rr_new) else np.inf
         if c_new < cost:
+            if fun_cost is not None:  # accepted: now the normal equations (the residuals are reused)
+                H_new, g_new, _ = fun_normal(x_new)
             dc = cost - c_new
             dx = np.max(np.abs(x_new - x) / span)
             x, cost, H, g = x_new, c_new, H_new, g_new

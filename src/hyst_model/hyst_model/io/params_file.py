@@ -93,10 +93,12 @@ class ParamsSpec:
     def theta(self, model: Model | None = None) -> np.ndarray:
         """Packed parameter vector for ``model`` (default :meth:`model`); every parameter must be present."""
         model = model or self.model()
-        missing = [n for n in model.names if n not in self.values]
+        legacy: dict[str, float] = getattr(model, "legacy_values", dict)()  # added since older files were written
+        values = {**{k: v for k, v in legacy.items() if k not in self.values}, **self.values}
+        missing = [n for n in model.names if n not in values]
         if missing:
             raise ParamsError(f"params file lacks model parameter(s) {', '.join(missing)}")
-        return model.pack(self.values)
+        return model.pack(values)
 
     def parameters(self) -> dict:
         """Flat ROS parameter names → values (``model.zeta1``, ``model.creep.gain``, ...), as a node declares."""

@@ -1,0 +1,43 @@
+"""How diagnose chooses between candidates that validate alike (stages.prefer_simpler)."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from hyst_model.diagnose.stages import SIGNATURE_MARGIN, n_params, prefer_simpler
+from hyst_model.spec import build_model
+
+CFG = {"dt": 5e-4, "u_scale": 15.0, "y_scale": 5e-6}
+
+
+def _setup():
+    n = 4000
+    val = np.zeros(n, dtype=bool)
+    val[::4] = True
+    return SimpleNamespace(base_model=build_model("mbw", [], CFG), cfg=dict(CFG), val=val, t_min=3.0), n
+
+
+def test_the_best_by_validation_wins_when_it_is_significantly_better():
+    s, n = _setup()
+    rng = np.random.default_rng(0)
+    e_good, e_bad = rng.normal(0, 1e-9, n), rng.normal(0, 3e-9, n)
+    i, why = prefer_simpler(s, [("creep", 3e-9, e_bad, 0.9), ("dynamics", 1e-9, e_good, 0.0)])
+    assert i == 1 and why == ""
+
+
+def test_alike_candidates_go_to_the_stronger_signature_else_the_fewer_parameters():
+    s, n = _setup()
+    rng = np.random.default_rng(1)
+    e = rng.normal(0, 1e-9, n)
+    e2 = e + rng.normal(0, 1e-12, n)  # the same error to within a thousandth: they validate alike
+    assert n_params(s, "delay") < n_params(s, "creep") < n_params(s, "dynamics")
+    # signatures that do not discriminate: parsimony, whatever the (insignificant) RMSE order
+    i, why = prefer_simpler(s, [("dynamics", 0.999e-9, e, 0.30), ("delay", 1.0e-9, e2, 0.20)])
+    assert i == 1 and "parameter" in why and "dynamics" in why
+    # a clearly stronger residual signature corroborates the richer effect
+    i, why = prefer_simpler(s, [("dynamics", 0.999e-9, e, 0.20 + SIGNATURE_MARGIN + 0.3),
+                                ("delay", 1.0e-9, e2, 0.20)])
+    assert i == 0 and why == ""
+    i, why = prefer_simpler(s, [("delay", 0.999e-9, e2, 0.1), ("dynamics", 1.0e-9, e, 0.9)])
+    assert i == 1 and "signature" in why
