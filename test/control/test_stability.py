@@ -137,3 +137,19 @@ def test_a_mode_only_part_of_the_motion_passes_is_checked_as_such():
     from hyst_control.errors import ConfigError
     with pytest.raises(ConfigError):
         Resonance(350.0, 0.04, 1.5)
+
+
+@pytest.mark.parametrize("lag", [0.0, 0.4, 1.0])
+def test_the_checked_resonance_is_the_one_the_model_simulates_at_any_sampling_lag(lag):
+    """resonance_tf filters an input exactly as the dynamics effect's series_filter does, read ``lag`` samples
+    into the hold (the tf the gains are checked against is the identified model's, not an approximation)."""
+    from scipy.signal import lfilter
+    from hyst_control.errors import ConfigError
+    from hyst_model.effects.dynamics_kernels import series_filter
+    res = Resonance(300.0, 0.05, 0.6, lag)
+    num, den = resonance_tf(res, DT)
+    x = np.r_[0.0, np.random.default_rng(1).standard_normal(400)]
+    want = x + 0.6 * (series_filter(x, 300.0, 0.05, DT, "zoh", lag) - x)
+    assert np.max(np.abs(lfilter(num, den, x) - want)) < 1e-12
+    with pytest.raises(ConfigError):
+        Resonance(300.0, 0.05, 0.6, 1.5)

@@ -35,9 +35,9 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.linalg import expm
 
 from hyst_model.core import MBWParams
+from hyst_model.effects.dynamics_kernels import zoh_matrices
 
 from .dmrac import DMRACGains
 from .dppc import DPPCGains
@@ -63,12 +63,15 @@ class Resonance:
     fn: float
     zeta: float
     part: float = 1.0
+    lag: float = 0.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fn) and self.fn > 0 and math.isfinite(self.zeta) and self.zeta > 0):
             raise ConfigError("a resonance needs fn > 0 Hz and zeta > 0")
         if not (math.isfinite(self.part) and 0.0 <= self.part <= 1.0):
             raise ConfigError("a resonance's participation must lie in [0, 1]")
+        if not (math.isfinite(self.lag) and 0.0 <= self.lag <= 1.0):
+            raise ConfigError("a resonance's sampling lag must lie in [0, 1] samples")
 
 
 def identified_resonance(effects, values) -> Resonance | None:
@@ -78,7 +81,8 @@ def identified_resonance(effects, values) -> Resonance | None:
         return None
     fn, zeta = values.get("dynamics.fn"), values.get("dynamics.zeta")
     part = values.get("dynamics.part", 1.0)  # files from before the participation: the whole motion
-    return Resonance(float(fn), float(zeta), float(part)) if fn and zeta else None
+    lag = values.get("dynamics.lag", 0.0)    # ... and before the sampling lag: read at the end of the hold
+    return Resonance(float(fn), float(zeta), float(part), float(lag)) if fn and zeta else None
 
 
 @dataclass(frozen=True)
@@ -123,22 +127,20 @@ class StabilityVerdict:
 # -- transfer functions (coefficient arrays in q = z⁻¹, index = power) ---------------------------------------
 def resonance_tf(res: Resonance, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """ZOH-discretised ω²/(s² + 2ζωs + ω²) with the MBW's timing (y_k responds to the x_k held over period k),
-    the share ``1 − part`` passing directly.
+    the share ``1 − part`` passing directly, read ``lag`` samples into the hold (the ``dynamics`` effect's
+    :func:`~hyst_model.effects.dynamics_kernels.zoh_matrices`).
 
-    s_k = Φ s_{k−1} + Γ x_k, y_k = s_k[0] ⇒ G(q) = [Γ1 + (Φ12Γ2 − Φ22Γ1) q] / [1 − tr Φ·q + det Φ·q²];
+    s_k = Φ s_{k−1} + Γa x_{k−1} + Γb x_k (Γa = Γ − Γb; lag 0: Γa = 0), y_k = s_k[0] ⇒
+    G(q) = [Γb1 + (Γa1 − Φ22Γb1 + Φ12Γb2) q + (Φ12Γa2 − Φ22Γa1) q²] / [1 − tr Φ·q + det Φ·q²];
     with participation p the reading is (1 − p) + p·G(q).
     """
-    w = 2.0 * math.pi * res.fn
-    m = np.zeros((3, 3))
-    m[:2, :2] = [[0.0, 1.0], [-w * w, -2.0 * res.zeta * w]]
-    m[1, 2] = w * w
-    e = expm(m * dt)
-    phi, gam = e[:2, :2], e[:2, 2]
-    num = np.array([gam[0], phi[0, 1] * gam[1] - phi[1, 1] * gam[0]])
+    phi, gam, gb = zoh_matrices(res.fn, res.zeta, dt, res.lag)
+    ga = gam - gb
+    num = np.array([gb[0], ga[0] - phi[1, 1] * gb[0] + phi[0, 1] * gb[1], phi[0, 1] * ga[1] - phi[1, 1] * ga[0]])
     den = np.array([1.0, -np.trace(phi), np.linalg.det(phi)])
     p = float(res.part)
     if p != 1.0:
-        num = np.array([p * num[0], p * num[1], 0.0]) + (1.0 - p) * den
+        num = p * num + (1.0 - p) * den
     return num, den
 
 

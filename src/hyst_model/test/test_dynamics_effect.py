@@ -53,8 +53,9 @@ def test_series_filter_dc_overshoot_and_resonance():
 
 def test_series_defaults_are_almost_identity_on_slow_input():
     eff = DynamicsEffect({"dt": 5e-4})
-    fn, zeta, part = (p.default for p in eff.params())
+    fn, zeta, part, lag = (p.default for p in eff.params())
     assert part == 1.0  # the whole motion through the mode, as params files before the participation meant
+    assert lag == 0.0   # read at the end of the hold, as params files before the sampling lag meant
     t = np.arange(4000) * 5e-4
     x = np.sin(2 * np.pi * 1.0 * t)
     # what is left is the time lag 2ζ/ωn (0.28 ms at 2 kHz): 0.18 % of a 1 Hz sine's amplitude
@@ -162,7 +163,7 @@ def test_series_structure_wraps_the_inner_model():
     base = build_model("mbw", [], cfg)
     model = build_model("mbw", ["dynamics"], cfg)
     tb = base.theta0
-    theta = np.concatenate([tb, [20.0, 0.1, 1.0]])
+    theta = np.concatenate([tb, [20.0, 0.1, 1.0, 0.0]])
     t = np.arange(3000) * 1e-3
     u = 75 + 75 * np.sin(2 * np.pi * 5 * t)
     yb = base.simulate(tb, t, u)
@@ -172,9 +173,19 @@ def test_series_structure_wraps_the_inner_model():
     assert np.allclose(foh.simulate(theta, t, u), series_filter(yb, 20.0, 0.1, 1e-3, "foh"))
     assert not np.allclose(foh.simulate(theta, t, u), model.simulate(theta, t, u), rtol=0, atol=1e-9)
     # a mode only part of the motion passes: the reading is (1 − part)·x + part·(mode output)
-    theta[-1] = 0.3
+    theta[-2] = 0.3
     ym = series_filter(yb, 20.0, 0.1, 1e-3, "zoh")
     assert np.allclose(model.simulate(theta, t, u), 0.7 * yb + 0.3 * ym)
+    # read one period into the hold (lag 1): the textbook ZOH of the mode, strictly proper
+    from scipy.signal import cont2discrete, lfilter
+    w = 2 * np.pi * 20.0
+    num, den, _ = cont2discrete(([w * w], [1.0, 2 * 0.1 * w, w * w]), 1e-3, method="zoh")
+    ym1 = yb[0] + lfilter(np.ravel(num), den, yb - yb[0])
+    theta[-1] = 1.0
+    assert np.allclose(model.simulate(theta, t, u), 0.7 * yb + 0.3 * ym1, rtol=0, atol=1e-12)
+    theta[-1] = 0.5  # half a period: between the two
+    mid = model.simulate(theta, t, u)
+    assert 0 < np.max(np.abs(mid - (0.7 * yb + 0.3 * ym1))) < np.max(np.abs(ym - ym1))
 
 
 def test_series_start_finds_the_participation_of_a_partial_mode():
@@ -194,9 +205,9 @@ def test_params_file_without_the_participation_reads_as_the_whole_mode(tmp_path)
     from hyst_model.io.params_file import read_params, write_params, spec_from_model
     cfg = {"dt": 1e-3, "u_scale": 15.0, "y_scale": 5e-6}
     model = build_model("mbw", ["dynamics"], cfg)
-    theta = np.concatenate([model.base.theta0, [20.0, 0.1, 1.0]])
+    theta = np.concatenate([model.base.theta0, [20.0, 0.1, 1.0, 0.0]])
     spec = spec_from_model(model, theta)
-    del spec.values["dynamics.part"]
+    del spec.values["dynamics.part"], spec.values["dynamics.lag"]
     write_params(tmp_path / "old.yaml", spec)
     old = read_params(tmp_path / "old.yaml")
     assert np.array_equal(old.theta(model), theta)

@@ -71,6 +71,30 @@ def test_drift_is_zero_at_start_follows_knots_and_extrapolates_the_trend():
     np.testing.assert_allclose(y, 5e-9 * t, atol=1e-20)
 
 
+
+def test_drift_early_spacing_puts_the_knots_at_the_square_of_even_ones_and_old_files_read_even():
+    """``drift.spacing: early`` places knot j at span·(j/K)², so a warm-up that settles in the first second of an
+    8 s record is followed; a configuration without the key (params files before it) is the even spacing."""
+    from hyst_model.errors import EffectError
+    t = np.arange(0, 8, 0.01)
+    u = np.zeros_like(t)
+    early = Drift(dict(CFG, **{"drift.knots": 4, "drift.span": 8.0, "drift.spacing": "early"}))
+    y = _apply(early, [1e-8, 2e-8, 3e-8, 4e-8], t, u)
+    for j, c in enumerate([1e-8, 2e-8, 3e-8, 4e-8], start=1):
+        k = int(round(8.0 * (j / 4) ** 2 / 0.01))
+        assert y[min(k, t.size - 1)] == pytest.approx(c if k < t.size else 3e-8 + (t[-1] - 4.5) / 3.5 * 1e-8)
+    warm = 3e-8 * (1 - np.exp(-t / 0.3))
+    fits = {}
+    for sp in ("even", "early"):
+        d = Drift(dict(CFG, **{"drift.knots": 5, "drift.span": 8.0, "drift.spacing": sp}))
+        st = d.start(t, u, warm, warm)
+        fits[sp] = np.sqrt(np.mean((warm - _apply(d, [st[f"c{j}"] for j in range(1, 6)], t, u)) ** 2))
+    assert fits["early"] < 0.5 * fits["even"]
+    assert Drift(dict(CFG, **{"drift.knots": 4})).spacing == "even"
+    with pytest.raises(EffectError):
+        Drift(dict(CFG, **{"drift.spacing": "late"}))
+
+
 def test_saturation_soft_limit_is_identity_inside_and_bounded_outside():
     x = np.linspace(-2, 2, 401)
     y = soft_limit(x, top=1.0, bottom=-1.0, w=0.2, two_sided=True)
@@ -153,3 +177,29 @@ def test_compose_with_config_keys_round_trips():
     assert cfg["drift.knots"] == 3 and "saturation.two_sided" in cfg and "asymmetry.u_c" in cfg
     m2 = build_model("mbw", ["drift", "saturation", "asymmetry"], cfg)
     assert m2.names == m.names
+
+
+def test_asymmetry_kink_bends_the_gain_at_one_level_its_start_finds_it_and_the_inverse_undoes_it():
+    """``asymmetry.form: kink``: the gain changes by ``slope`` above ``level`` (soft over 2 % of the range); the
+    data-driven start recovers a planted kink; the controllers' inverse is exact; a quadratic file is unchanged."""
+    from hyst_model.effects.asymmetry import Asymmetry
+    from hyst_model.errors import EffectError
+    cfg = dict(CFG, **{"asymmetry.form": "kink", "asymmetry.y_lo": 0.0, "asymmetry.y_hi": 1.5e-5})
+    a = Asymmetry(cfg)
+    assert [p.name for p in a.params()] == ["slope", "level"]
+    t = np.arange(0, 4, 1e-3)
+    u = 75 + 75 * np.sin(2 * np.pi * 0.5 * t)            # x = 1e-7·u spans 0 … 15 µm
+    y = _apply(a, [-0.2, 1.0e-5], t, u)
+    x = 1e-7 * u
+    lo, hi = x < 0.8e-5, x > 1.2e-5                                              # 6.7 widths from the level
+    np.testing.assert_allclose(y[lo], x[lo], rtol=0, atol=1e-10)                 # identity below the level
+    np.testing.assert_allclose(y[hi], x[hi] - 0.2 * (x[hi] - 1e-5), rtol=0, atol=1e-10)  # 20 % less gain above
+    st = a.start(t, u, y, y - x)
+    assert st["level"] == pytest.approx(1.0e-5, abs=1.5e-6) and st["slope"] == pytest.approx(-0.2, abs=0.05)
+    inv = a.online(np.array([-0.2, 1.0e-5]))
+    back = np.array([inv.measure(float(v), 0.0) for v in y])
+    np.testing.assert_allclose(back, x, atol=1e-15)
+    assert "form" not in Asymmetry(CFG).config()            # params files of the quadratic form stay as they were
+    assert Asymmetry(CFG).form == "quadratic"
+    with pytest.raises(EffectError):
+        Asymmetry(dict(CFG, **{"asymmetry.form": "cubic"}))

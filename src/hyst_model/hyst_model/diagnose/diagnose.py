@@ -22,7 +22,8 @@ The engine (:func:`diagnose`)
    effect explains is ``"unexplained"``, never ``"none"``, with the evidence whether it is the loop shape or
    something outside the library (:mod:`.unexplained`);
 6. builds the error ladder greedily: base → + best effect → + the next effect that still helps … with the
-   validation RMSE at each rung.
+   validation RMSE at each rung, then takes the backward step of stepwise regression (:mod:`.prune`): an effect
+   the others make unnecessary is dropped again.
 """
 from __future__ import annotations
 
@@ -38,6 +39,7 @@ from ..effects.signals import noise_floor, sample_time, fmt_len
 from ..errors import DataError, FitError
 from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scales, _simulate, candidate_names,
                     default_fitter, guarded_refit, refit, rmse, validation_mask)
+from .prune import prune
 from .stages import Candidate, Rung, Setup, climb, refit_all, screen_all, verdict
 from .unexplained import UNEXPLAINED_FACTOR, Unexplained
 
@@ -85,7 +87,7 @@ class Diagnosis:
 def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None, fitter=None,
              min_factor: float = 1.1, t_min: float = 3.0, noise_margin: float = 1.1,
              unexplained_factor: float = UNEXPLAINED_FACTOR,
-             full_rate_top: int = 2, max_rungs: int = 3, progress: bool | Callable = False,
+             full_rate_top: int = 6, max_rungs: int = 3, progress: bool | Callable = False,
              config: dict | None = None) -> Diagnosis:
     """Fit ``base``, test each effect by its residual signature and a validated refit, name the missing one.
 
@@ -175,6 +177,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     cands, carry, full = screen_all(s)                               # 1. each effect on the base held fixed
     ranked = refit_all(s, cands, carry, full)                        # 2. each refitted jointly, tested
     ladder, models, chosen = climb(s, ranked, cands, carry, full)    # 3. the error ladder
+    chosen = prune(s, ladder, models, chosen, cands)                 # 3b. and its backward step
     ranked, missing, unexplained, expl = verdict(s, cands, ladder, models, chosen, unexplained_factor,
                                                  _explain)           # 4. the answer in words
     return Diagnosis(base, s.base_val, rmse(e_base[train]), noise, ranked, missing, ladder, expl, n, dt,

@@ -9,6 +9,17 @@ normalised input and in the hysteretic output, added to the output:
 
 with centres ``u_c``, ``y_c`` fixed at the middle of the identification data (stored in the params file as
 ``asymmetry.u_c``, ``asymmetry.y_c``) so the term is symmetric-free of the linear gain the base already fits.
+
+A stage whose stiffness changes at a displacement (a flexure or preload that engages above a level, a sensor
+whose gain changes over its range) bends the loop at one level instead of everywhere — a gain kink, which a
+quadratic imitates only in part. ``asymmetry.form: kink`` (``form: quadratic`` is the default and what a params
+file without the key means) models it as
+
+    y = y_inner + slope · w · softplus((y_inner − level) / w),     w = 2 % of the identified range
+
+``slope`` (the relative change of the gain above ``level``, > −1 so the map stays monotonic) and ``level`` (m,
+within the identified range ``asymmetry.y_lo`` … ``y_hi``, taken from the data). ``hyst diagnose`` fits both forms
+(:meth:`Asymmetry.variants`) and keeps whichever validates better.
 """
 from __future__ import annotations
 
@@ -16,12 +27,22 @@ import math
 
 import numpy as np
 
+from ..errors import EffectError
 from ..model import Param
 from .base import Effect
 from .online import OnlineEffect
 from .signals import corr
 
-__all__ = ["Asymmetry", "AsymmetryInverse"]
+__all__ = ["Asymmetry", "AsymmetryInverse", "KinkInverse", "FORMS"]
+
+#: Forms of the even-order bend: a quadratic over the whole stroke, or a gain kink at one level.
+FORMS = ("quadratic", "kink")
+#: Softness of the kink: this share of the identified output range.
+KINK_SOFTNESS = 0.02
+
+
+def _softplus(z: np.ndarray) -> np.ndarray:
+    return np.logaddexp(0.0, z)
 
 
 class Asymmetry(Effect):
@@ -37,23 +58,59 @@ class Asymmetry(Effect):
         super().__init__(config)
         self.u_c = float(self._config.get("asymmetry.u_c", 0.0))
         self.y_c = float(self._config.get("asymmetry.y_c", 0.0))
+        self.form = str(self._config.get("asymmetry.form", "quadratic"))
+        if self.form not in FORMS:
+            raise EffectError(f"asymmetry.form must be one of {', '.join(FORMS)}, not {self.form!r}")
+        self.y_lo = float(self._config.get("asymmetry.y_lo", -self.y_scale))
+        self.y_hi = float(self._config.get("asymmetry.y_hi", self.y_scale))
+        if not self.y_hi > self.y_lo:
+            raise EffectError("asymmetry.y_hi must lie above asymmetry.y_lo")
+
+    @staticmethod
+    def variants() -> list[dict[str, str]]:
+        """Configurations ``hyst diagnose`` tries, keeping whichever validates better: both forms."""
+        return [{"asymmetry.form": f} for f in FORMS]
+
+    @classmethod
+    def data_config(cls, t, u, y, scored):
+        """The output range the identification scores: where a kink's level may lie."""
+        ys = np.asarray(y, float)[np.asarray(scored, bool)]
+        return {"asymmetry.y_lo": float(np.min(ys)), "asymmetry.y_hi": float(np.max(ys))} if ys.size else {}
+
+    @property
+    def _width(self) -> float:
+        return KINK_SOFTNESS * (self.y_hi - self.y_lo)
 
     def params(self):
+        if self.form == "kink":
+            return (Param("slope", 0.0, -0.9, 0.9, "", "relative change of the gain above the level"),
+                    Param("level", 0.5 * (self.y_lo + self.y_hi), self.y_lo, self.y_hi, "m",
+                          "output level where the gain changes"))
         return (Param("a_u", 0.0, -0.5, 0.5, "", "quadratic term in the input, per normalised input unit²"),
                 Param("a_y", 0.0, -0.5, 0.5, "", "quadratic term in the hysteretic output, per output unit²"))
 
     def config(self):
-        return {"u_c": self.u_c, "y_c": self.y_c}
+        out: dict[str, float | str] = {"u_c": self.u_c, "y_c": self.y_c}
+        if self.form == "kink":  # a quadratic file stays as it was written before the kink existed
+            out.update(form=self.form, y_lo=self.y_lo, y_hi=self.y_hi)
+        return out
 
     def output(self, theta, t, u, y):
+        if self.form == "kink":
+            w = self._width
+            return y + float(theta[0]) * w * _softplus((y - float(theta[1])) / w)
         uu = (np.asarray(u, float) - self.u_c) / self.u_scale
         yy = (y - self.y_c) / self.y_scale
         return y + self.y_scale * (theta[0] * uu * uu + theta[1] * yy * yy)
 
     def online(self, theta, base=None):
+        if self.form == "kink":
+            return KinkInverse(float(theta[0]), float(theta[1]), self._width)
         return AsymmetryInverse(float(theta[0]), float(theta[1]), self.u_c, self.y_c, self.u_scale, self.y_scale)
 
     def start(self, t, u, y, residual):
+        if self.form == "kink":
+            return self._kink_start(np.asarray(y, float) - residual, np.asarray(residual, float))
         # Centre on the data, then regress the residual on the even input term.
         self.u_c = 0.5 * (float(np.min(u)) + float(np.max(u)))
         self.y_c = 0.5 * (float(np.min(y)) + float(np.max(y)))
@@ -61,6 +118,27 @@ class Asymmetry(Effect):
         q = q - q.mean()
         den = float(q @ q)
         return {"a_u": float(q @ (residual - residual.mean()) / den / self.y_scale)} if den > 0 else {}
+
+    def _kink_start(self, x: np.ndarray, residual: np.ndarray) -> dict[str, float]:
+        """Level on a grid of the base output's quantiles, slope by least squares (the residual's mean and linear
+        trend in x removed: the base's offset and gain take those)."""
+        w = self._width
+        X = np.column_stack([np.ones_like(x), x])
+        proj = np.linalg.lstsq(X, residual, rcond=None)[0]
+        r = residual - X @ proj
+        best: tuple[float, dict[str, float]] = (float(r @ r), {})
+        for q in np.linspace(0.1, 0.9, 17):
+            level = float(np.quantile(x, q))
+            h = w * _softplus((x - level) / w)
+            h = h - X @ np.linalg.lstsq(X, h, rcond=None)[0]
+            den = float(h @ h)
+            if den <= 0:
+                continue
+            a = float(np.clip((h @ r) / den, -0.9, 0.9))
+            c = float(((r - a * h) ** 2).sum())
+            if c < best[0]:
+                best = (c, {"slope": a, "level": float(np.clip(level, self.y_lo, self.y_hi))})
+        return best[1]
 
     def signature(self, t, u, residual, dt):
         uc = 0.5 * (float(np.min(u)) + float(np.max(u)))
@@ -97,3 +175,35 @@ class AsymmetryInverse(OnlineEffect):
 
     def target(self, r, u):
         return self._inner(r, u)
+
+
+class KinkInverse(OnlineEffect):
+    """The gain kink inverted per sample: x with x + slope·w·softplus((x − level)/w) = y, by Newton's method from
+    the piecewise-linear inverse (the map is monotonic for slope > −1; a few iterations reach rounding)."""
+
+    name = "asymmetry"
+
+    def __init__(self, slope: float, level: float, width: float) -> None:
+        if not slope > -1.0:
+            raise ValueError(f"a gain kink with slope {slope:g} ≤ −1 folds the map: no inverse")
+        self._a, self._l, self._w = slope, level, width
+
+    def _inner(self, y: float) -> float:
+        a, lv, w = self._a, self._l, self._w
+        x = y if y <= lv else lv + (y - lv) / (1.0 + a)
+        for _ in range(30):
+            z = (x - lv) / w
+            sp = max(z, 0.0) + math.log1p(math.exp(-abs(z)))
+            f = x + a * w * sp - y
+            d = 1.0 + a / (1.0 + math.exp(-z)) if z > -700 else 1.0
+            step = f / d
+            x -= step
+            if abs(step) <= 1e-15 * max(abs(x), w):
+                break
+        return x
+
+    def measure(self, y, u):
+        return self._inner(y)
+
+    def target(self, r, u):
+        return self._inner(r)

@@ -21,7 +21,12 @@ The mode is discretised exactly, starting at rest at ``x[0]``, for one of two in
 
 * ``zoh`` (default) — the input is held over each sample period, as a DAC-driven amplifier holds the voltage:
   ``s_k = Φ s_{k−1} + Γ x_k``; sample ``k`` reads the stage at the end of the period over which ``x_k`` was held,
-  the MBW's own timing (``y_k`` responds to ``u_k``; a further transport delay is the ``delay`` effect's job);
+  the MBW's own timing (``y_k`` responds to ``u_k``; a further transport delay is the ``delay`` effect's job).
+  Where the sensor samples within the hold is the parameter ``lag`` (0…1 sample): 0 is that timing, 1 the
+  textbook ZOH in which ``x_{k−1}`` is held over the period before sample ``k`` (strictly proper, as
+  ``scipy.signal.cont2discrete`` gives it). The two differ by one sample at the resonance — 54° of phase for
+  300 Hz at 2 kHz — so a mode read with the other timing was fitted as a delay; a rig's ADC/DAC timing lies
+  anywhere between (:func:`~.dynamics_kernels.zoh_matrices`);
 * ``foh`` — the input is linear between samples (first-order hold), right for smooth, band-limited inputs.
 
 On the simulated PEA stage with a hidden 350 Hz resonance (ζ = 0.04) the two differ by 0.9 µm RMS: a lightly
@@ -73,7 +78,7 @@ from ..errors import EffectError
 from ..model import Param
 from .base import Effect
 from .dynamics_evidence import coherence_test, residual_peak
-from .dynamics_kernels import HOLDS, _zoh_matrices, msd_bw_simulate, series_filter, upsample
+from .dynamics_kernels import HOLDS, msd_bw_simulate, series_filter, upsample, zoh_matrices
 from .online import OnlineEffect
 from .signals import corr, holds, sample_time, smooth
 
@@ -138,9 +143,17 @@ class DynamicsEffect(Effect):
         return {"structure": self.structure, "hold": self.hold, "substeps": float(self.substeps),
                 "interp": self.interp}
 
+    @property
+    def _lagged(self) -> bool:
+        """The series structure with a held input has the sampling-lag parameter."""
+        return self.structure == "series" and self.hold == "zoh"
+
     def legacy_values(self) -> dict[str, float]:
-        # params files from before the participation existed: the whole motion passes the mode
-        return {"part": 1.0} if self.structure == "series" else {}
+        # params files from before the participation / the sampling lag existed: the whole motion passes the
+        # mode, read at the end of the hold
+        if self.structure != "series":
+            return {}
+        return {"part": 1.0, "lag": 0.0} if self._lagged else {"part": 1.0}
 
     @staticmethod
     def variants() -> list[dict[str, str]]:
@@ -154,7 +167,10 @@ class DynamicsEffect(Effect):
             return (Param("fn", 0.4 * fs, SERIES_FN_MIN, nyq, "Hz",
                           "natural frequency of the stage after the hysteresis"),
                     Param("zeta", 0.7, 1e-3, 1.0, "", "damping ratio of that resonance (≤ 1: a resonance)"),
-                    Param("part", 1.0, 0.0, 1.0, "", "participation: share of the displacement through the mode"))
+                    Param("part", 1.0, 0.0, 1.0, "", "participation: share of the displacement through the mode"),
+                    ) + ((Param("lag", 0.0, 0.0, 1.0, "sample", "where the sensor samples within the input's hold "
+                                "(0: at its end, the MBW's timing; 1: one period later, the textbook ZOH)"),)
+                         if self._lagged else ())
         gref = self.y_scale / self.u_scale
         yref = 10.0 * self.y_scale
         return (Param("fn", 0.05 * fs, 0.2, nyq, "Hz", "small-signal natural frequency sqrt((k+α)/m)/2π"),
@@ -192,7 +208,8 @@ class DynamicsEffect(Effect):
         if self.structure == "series":
             x = np.asarray(inner(t, u), dtype=np.float64)
             dt = sample_time(t) if t.size > 1 else self.dt
-            ym = series_filter(x, float(theta[0]), float(theta[1]), dt, self.hold)
+            lag = float(theta[3]) if self._lagged else 0.0
+            ym = series_filter(x, float(theta[0]), float(theta[1]), dt, self.hold, lag)
             part = float(theta[2])
             return ym if part == 1.0 else x + part * (ym - x)
         offset = 0.0
@@ -211,7 +228,8 @@ class DynamicsEffect(Effect):
     def online(self, theta, base=None):
         if self.structure != "series" or self.hold != "zoh" or base is None:
             return None
-        return SeriesResonanceInverse(float(theta[0]), float(theta[1]), self.dt, base, float(theta[2]))
+        return SeriesResonanceInverse(float(theta[0]), float(theta[1]), self.dt, base, float(theta[2]),
+                                      float(theta[3]))
 
     # identification helpers -----------------------------------------------------------------------------
     def start(self, t, u, y, residual):
@@ -229,17 +247,19 @@ class DynamicsEffect(Effect):
             x = y - np.asarray(residual, dtype=np.float64)  # the inner model's output
             best = (np.inf, None)
             ex = y - x
-            for fn in grid:
-                for z in zetas:
-                    d = series_filter(x, fn, z, dt, self.hold) - x  # what the whole mode adds to the reading
-                    den = float(d @ d)
-                    if not (np.isfinite(den) and den > 0):
-                        continue
-                    part = float(np.clip((d @ ex) / den, 0.0, 1.0))  # least squares, within the bounds
-                    r = ex - part * d
-                    c = float(r @ r)
-                    if np.isfinite(c) and c < best[0]:
-                        best = (c, {"fn": float(fn), "zeta": float(z), "part": part})
+            for lag in ((0.0, 0.5, 1.0) if self._lagged else (0.0,)):
+                for fn in grid:
+                    for z in zetas:
+                        d = series_filter(x, fn, z, dt, self.hold, lag) - x  # what the whole mode adds
+                        den = float(d @ d)
+                        if not (np.isfinite(den) and den > 0):
+                            continue
+                        part = float(np.clip((d @ ex) / den, 0.0, 1.0))  # least squares, within the bounds
+                        r = ex - part * d
+                        c = float(r @ r)
+                        if np.isfinite(c) and c < best[0]:
+                            best = (c, {"fn": float(fn), "zeta": float(z), "part": part}
+                                    | ({"lag": lag} if self._lagged else {}))
             return best[1] or {}
         # feedback: the linear MSD (bg = bd = 0) with the compliance fitted by least squares, per (fn, ζ).
         u = np.asarray(u, dtype=np.float64)
@@ -369,31 +389,40 @@ class SeriesResonanceInverse(OnlineEffect):
 
     With a participation ``part`` < 1 the reading is (1 − part)·x + part·(mode output): the direct share adds
     (1 − part) to the feed-through (x_k = (r_k − part·(Φ s_{k−1})_0) / ((1 − part) + part·Γ_0)) and the
-    predictor subtracts part·(H x̂ − x̂).
+    predictor subtracts part·(H x̂ − x̂). With a sampling lag (``lag`` > 0, :func:`~.dynamics_kernels.zoh_matrices`)
+    the state also carries the previous inner output (its Γ − Γ_b share), and the feed-through is Γ_b; a lag that
+    puts the sampled zero outside the unit circle is refused like any other.
     """
 
     name = "dynamics"
 
-    def __init__(self, fn: float, zeta: float, dt: float, base, part: float = 1.0) -> None:
-        self._phi, self._g, _ = _zoh_matrices(fn, zeta, dt)
+    def __init__(self, fn: float, zeta: float, dt: float, base, part: float = 1.0, lag: float = 0.0) -> None:
+        phi, g, gb = zoh_matrices(fn, zeta, dt, lag)
+        # State z = (s, x_{k−1}): z_k = A z_{k−1} + B x_k reads the mode's s_k = Φ s_{k−1} + (Γ − Γ_b) x_{k−1}
+        # + Γ_b x_k (sampling lag, zoh_matrices; lag 0: Γ_b = Γ and x_{k−1} drops out).
+        self._A = np.zeros((3, 3))
+        self._A[:2, :2], self._A[:2, 2] = phi, g - gb
+        self._B = np.r_[gb, 1.0]
         self._part = float(part)
-        self._d = (1.0 - self._part) + self._part * float(self._g[0])  # feed-through of x_k to y_k
+        self._d = (1.0 - self._part) + self._part * float(gb[0])  # feed-through of x_k to y_k
         if not abs(self._d) > 1e-9:
             raise ValueError(f"a {fn:g} Hz resonance has no direct feed-through at dt = {dt:g} s")
-        zeros = np.linalg.eigvals(self._phi - self._part * np.outer(self._g, self._phi[0]) / self._d)
+        zeros = np.linalg.eigvals(self._A - self._part * np.outer(self._B, self._A[0]) / self._d)
         if np.max(np.abs(zeros)) >= 0.999:
-            raise ValueError(f"the {fn:g} Hz resonance's sampled zero lies on or outside the unit circle: "
-                             "its inverse would diverge")
+            raise ValueError(f"the {fn:g} Hz resonance's sampled zero lies on or outside the unit circle"
+                             + (f" (read {lag:.2f} samples into the hold)" if lag > 0 else "")
+                             + ": its inverse would diverge")
         self._pred = base()
-        self._s = np.zeros(2)  # resonance state driven by the base model's prediction
+        self._s = np.zeros(3)  # resonance state (and the last input) driven by the base model's prediction
 
     def reset(self, y, u):
-        self._s[:] = (self._pred.reset(u), 0.0)
+        x0 = self._pred.reset(u)
+        self._s[:] = (x0, 0.0, x0)
 
     def measure(self, y, u):
         x_hat = self._pred.step(u)
-        self._s = self._phi @ self._s + self._g * x_hat
+        self._s = self._A @ self._s + self._B * x_hat
         return y + self._part * (x_hat - float(self._s[0]))
 
     def target(self, r, u):
-        return (r - self._part * float((self._phi @ self._s)[0])) / self._d
+        return (r - self._part * float((self._A @ self._s)[0])) / self._d

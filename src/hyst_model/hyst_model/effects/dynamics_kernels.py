@@ -11,7 +11,7 @@ from scipy.linalg import expm
 
 from ..errors import EffectError
 
-__all__ = ["series_filter", "msd_bw_simulate", "upsample", "HOLDS"]
+__all__ = ["series_filter", "zoh_matrices", "msd_bw_simulate", "upsample", "HOLDS"]
 
 HOLDS = ("zoh", "foh")
 
@@ -35,15 +35,23 @@ def _foh_matrices(fn: float, zeta: float, dt: float) -> tuple[np.ndarray, np.nda
     return E[:2, :2].copy(), E[:2, 2].copy(), E[:2, 3].copy() / dt
 
 
-def _zoh_matrices(fn: float, zeta: float, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Exact discretisation for an input held over each period: ``s_{k+1} = Φ s_k + Γ x_{k+1}``.
+def zoh_matrices(fn: float, zeta: float, dt: float, lag: float = 0.0
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact discretisation for a held input: ``s_{k+1} = Φ s_k + (Γ − Γ_b) x_k + Γ_b x_{k+1}``; returns Φ, Γ, Γ_b.
 
-    Written in the first-order-hold form of :func:`_series_run` (Γ1 = Γ2 = Γ, so Γ1 x_k + Γ2 (x_{k+1} − x_k)
-    = Γ x_{k+1}).
+    ``lag`` (in sample periods, 0…1) is where the sensor samples relative to the hold: with ``lag = 0`` sample
+    ``k+1`` reads the stage at the end of the period over which ``x_{k+1}`` was held (the MBW's own timing,
+    Γ_b = Γ); with ``lag = 1`` the input ``x_k`` is held over the whole period before sample ``k+1`` (the textbook
+    ZOH, ``scipy.signal.cont2discrete(method="zoh")``, strictly proper); in between, ``x_k`` still drives the
+    stage for the first ``lag``·Δt of the period (Γ_b = ∫₀^{(1−lag)Δt} e^{Aτ}B dτ). Written in the first-order-
+    hold form of :func:`_series_run` (Γ1 = Γ, Γ2 = Γ_b: Γ1 x_k + Γ2 (x_{k+1} − x_k)).
     """
     E = _expm_with_input(fn, zeta, dt, ramp=False)
     g = E[:2, 2].copy()
-    return E[:2, :2].copy(), g, g.copy()
+    if lag <= 0.0:
+        return E[:2, :2].copy(), g, g.copy()
+    gb = _expm_with_input(fn, zeta, (1.0 - min(lag, 1.0)) * dt, ramp=False)[:2, 2].copy()
+    return E[:2, :2].copy(), g, gb
 
 
 @njit(cache=True)
@@ -64,18 +72,22 @@ def _series_run(phi: np.ndarray, g1: np.ndarray, g2: np.ndarray, x: np.ndarray) 
     return y
 
 
-def series_filter(x: np.ndarray, fn: float, zeta: float, dt: float, hold: str = "foh") -> np.ndarray:
+def series_filter(x: np.ndarray, fn: float, zeta: float, dt: float, hold: str = "foh",
+                  lag: float = 0.0) -> np.ndarray:
     """Pass ``x`` through the unit-DC-gain second-order low-pass (fn Hz, damping ζ), at rest at ``x[0]``.
 
     ``hold='foh'``: ``s_{k+1} = Φ s_k + Γ1 x_k + Γ2 (x_{k+1} − x_k)`` for the state s = (y, ẏ), exact when x is
     linear between samples; ``hold='zoh'``: ``s_{k+1} = Φ s_k + Γ x_{k+1}``, exact when x_{k+1} is held over
-    the period that ends at sample k+1.
+    the period that ends at sample k+1 (``lag`` > 0: the sensor samples ``lag`` periods after the hold starts,
+    see :func:`zoh_matrices`; ``foh`` takes no lag).
     """
     x = np.ascontiguousarray(x, dtype=np.float64)
     if hold not in HOLDS:
         raise EffectError(f"dynamics.hold must be one of {', '.join(HOLDS)}, not {hold!r}")
-    mats = _zoh_matrices if hold == "zoh" else _foh_matrices
-    phi, g1, g2 = mats(float(fn), float(zeta), float(dt))
+    if hold == "zoh":
+        phi, g1, g2 = zoh_matrices(float(fn), float(zeta), float(dt), float(lag))
+    else:
+        phi, g1, g2 = _foh_matrices(float(fn), float(zeta), float(dt))
     return _series_run(phi, g1, g2, x)
 
 

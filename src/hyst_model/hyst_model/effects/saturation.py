@@ -7,9 +7,13 @@ the further out. The effect is the identity inside a knee and a tanh soft limit 
     y = k_hi + w · tanh((x − k_hi) / w)   for x > k_hi = top − w        (x = y_inner)
     y = k_lo − w · tanh((k_lo − x) / w)   for x < k_lo = bottom + w      (two-sided only)
 
-``top`` and ``bottom`` (m) are the asymptotic limits, ``w`` (m) the knee width. A unipolar stage (PEA, input
-never negative) saturates at the top only; a bipolar one (GMA) at both ends: ``saturation.two_sided`` is chosen
-from the data's input sign in :meth:`Saturation.start` and stored in the params file.
+``top`` and ``bottom`` (m) are the asymptotic limits, ``w`` (m) the knee width. A stage may saturate at the top
+only (a preloaded stack driven against its stop) or at both ends (a flexure stiffening both ways, a sensor's
+range, and an amplifier's rails whatever the sign of its input): ``saturation.two_sided`` is configuration stored
+in the params file. ``hyst diagnose`` fits both (:meth:`Saturation.variants`) and keeps whichever validates
+better; without it being set, :meth:`Saturation.start` guesses from the input's sign (bipolar: both ends) — the
+guess alone missed the lower knee of unipolar piezo records with a symmetric soft limit, which then took an
+asymmetry to imitate it.
 """
 from __future__ import annotations
 
@@ -51,6 +55,7 @@ class Saturation(Effect):
     def __init__(self, config=None):
         super().__init__(config)
         self.two_sided = bool(float(self._config.get("saturation.two_sided", 0.0)))
+        self._two_sided_set = "saturation.two_sided" in self._config
         self.bound = float(self._config.get("offset_bound", 1e-3)) + 50.0 * self.y_scale
 
     def params(self):
@@ -62,6 +67,11 @@ class Saturation(Effect):
     def config(self):
         return {"two_sided": float(self.two_sided)}
 
+    @staticmethod
+    def variants() -> list[dict[str, float]]:
+        """Configurations ``hyst diagnose`` tries, keeping whichever validates better: top only, both ends."""
+        return [{"saturation.two_sided": 0.0}, {"saturation.two_sided": 1.0}]
+
     def output(self, theta, t, u, y):
         top, bottom, w = float(theta[0]), float(theta[1]), float(theta[2])
         return soft_limit(y, top, bottom, w, self.two_sided)
@@ -70,7 +80,8 @@ class Saturation(Effect):
         return SaturationInverse(float(theta[0]), float(theta[1]), float(theta[2]), self.two_sided)
 
     def start(self, t, u, y, residual):
-        self.two_sided = bool(np.min(u) < -0.05 * np.max(np.abs(u)))
+        if not self._two_sided_set:  # a guess from the input's sign where the configuration does not say
+            self.two_sided = bool(np.min(u) < -0.05 * np.max(np.abs(u)))
         x = np.asarray(y, float) - residual  # ≈ base model output
         lo, hi = float(np.min(x)), float(np.max(x))
         span = hi - lo

@@ -1,0 +1,78 @@
+"""Backward elimination after the forward ladder of :func:`hyst_model.diagnose.stages.climb`.
+
+The ladder adds effects greedily: the first effect is the one that explains most of the error on its own, the
+second the one that helps most on top of it. With two effects present, an effect taken early can stand in for
+part of another (a symmetric soft saturation's bow looks like asymmetry, a drift's trend like creep) and stay in
+the ladder after the true pair has been found. Stepwise regression answers this with a backward step: each
+effect of the final rung is dropped in turn, the rest refitted from the final model's values, and an effect whose
+removal the full model does not beat significantly (the same test that admitted it: ``min_factor`` and the
+paired t over the validation chunks) is removed. Identification never goes backwards: the pruned model is at most
+a significance test worse on validation than the full one, and it has fewer parameters.
+"""
+from __future__ import annotations
+
+from typing import cast
+
+import numpy as np
+
+from ..effects.base import ComposedModel
+from ..effects.signals import fmt_len
+from ..errors import EffectError, FitError
+from ..model import Model
+from .refit import _effect_values, _simulate, guarded_refit, paired_t, rmse
+from .stages import Rung, Setup
+
+__all__ = ["prune"]
+
+
+def prune(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], chosen: list, cands: dict
+          ) -> list:
+    """Drop effects of the final rung that the others make unnecessary; returns the effects kept (in ladder order).
+
+    A dropped effect's candidate gets ``significant = False`` and a note saying why; a final rung with the kept
+    effects is appended to ``ladder`` (its model to ``models``), so the ladder shows the path and the answer.
+    """
+    if len(chosen) < 2:
+        return chosen
+    t, u, y, val, train = s.t, s.u, s.y, s.val, s.train
+    kept = list(chosen)
+    m_full, th_full = models[ladder[-1].model]
+    e_full = y - _simulate(m_full, th_full, t, u)
+    r_full = rmse(e_full[val])
+    changed = False
+    while len(kept) >= 2:
+        full_c = cast(ComposedModel, m_full)
+        values = full_c.unpack(th_full)
+        trials = []
+        for nm in kept:
+            rest = [k for k in kept if k != nm]
+            try:
+                mm, th, yh = guarded_refit(s.base_model, rest, s.cfg, t, u, y, val,
+                                           {k: v for k, v in values.items() if not k.startswith(nm + ".")},
+                                           theta_base=full_c.split(th_full)[0],
+                                           carry={k: v for k, v in _effect_values(m_full, th_full).items()
+                                                  if not k.startswith(nm + ".")},
+                                           fitter=s.fit, two_stage=False)
+            except (EffectError, FitError):
+                continue
+            e = y - yh
+            r = rmse(e[val])
+            t_stat = paired_t(e[val], e_full[val])
+            s.say(f"prune {m_full.name} - {nm}: validation RMSE {fmt_len(r)} (paired t {t_stat:.1f})", step=False)
+            if r_full > 0 and (r / r_full < s.min_factor or t_stat < s.t_min):
+                trials.append((r, nm, mm, th, e, t_stat))
+        if not trials:
+            break
+        r, nm, mm, th, e, t_stat = min(trials, key=lambda x: x[0])
+        c = cands[nm]
+        c.significant = False
+        c.note = (f"dropped again: without it {'+'.join([s.base] + [k for k in kept if k != nm])} validates at "
+                  f"{fmt_len(r)} against {fmt_len(r_full)} with it (not significantly worse: ratio "
+                  f"{r / r_full:.2f}, paired t {t_stat:.1f}) — the other effects explain what it did")
+        kept.remove(nm)
+        m_full, th_full, e_full, r_full = mm, th, e, r
+        changed = True
+    if changed:
+        ladder.append(Rung(m_full.name, list(kept), r_full, rmse(e_full[train])))
+        models[m_full.name] = (m_full, th_full)
+    return kept
