@@ -180,7 +180,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     chosen = prune(s, ladder, models, chosen, cands)                 # 3b. and its backward step
     ranked, missing, unexplained, expl = verdict(s, cands, ladder, models, chosen, unexplained_factor,
                                                  _explain)           # 4. the answer in words
-    return Diagnosis(base, s.base_val, rmse(e_base[train]), noise, ranked, missing, ladder, expl, n, dt,
+    return Diagnosis(base, s.base_val, rmse(s.e_base[train]), noise, ranked, missing, ladder, expl, n, dt,
                      time.perf_counter() - t0, models, unexplained)
 
 
