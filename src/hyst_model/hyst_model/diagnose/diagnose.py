@@ -14,7 +14,9 @@ The engine (:func:`diagnose`)
    it: the effect's few parameters (and the offset) fitted from its data-driven start on top of the base model
    held fixed (:class:`Fixed`) — cheap at full rate, where the per-sample base parameters stay valid (decimating
    would change them). Every candidate is then refitted jointly with the base (:func:`guarded_refit`), since
-   the base held fixed hides effects it imitates; validation is on interleaved blocks (:func:`validation_mask`);
+   the base held fixed hides effects it imitates; validation is on interleaved blocks (:func:`validation_mask`).
+   The base alone is refitted from the best joint refits' base parameters and replaced where that validates
+   better (:func:`~.stages.rebase`: a base in a poor basin otherwise makes any effect look significant);
 5. ranks candidates by validation RMSE, calls one *significant* only if it cuts the validation RMSE by at least
    ``min_factor`` and the per-chunk squared-error reduction is significant (robust paired t > ``t_min`` over 40
    validation chunks), and reports ``"none"`` when the baseline is already at the noise floor or nothing is
