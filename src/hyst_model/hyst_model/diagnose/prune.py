@@ -19,7 +19,7 @@ from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
-from .refit import _effect_values, _simulate, guarded_refit, paired_t, rmse
+from .refit import _simulate, guarded_refit, paired_t, rmse
 from .stages import Rung, Setup
 
 __all__ = ["prune"]
@@ -46,12 +46,11 @@ def prune(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], c
         trials = []
         for nm in kept:
             rest = [k for k in kept if k != nm]
+            start = {k: v for k, v in values.items() if not k.startswith(nm + ".")}  # the final point without nm
             try:
-                mm, th, yh = guarded_refit(s.base_model, rest, s.cfg, t, u, y, val,
-                                           {k: v for k, v in values.items() if not k.startswith(nm + ".")},
+                mm, th, yh = guarded_refit(s.base_model, rest, s.cfg, t, u, y, val, start,
                                            theta_base=full_c.split(th_full)[0],
-                                           carry={k: v for k, v in _effect_values(m_full, th_full).items()
-                                                  if not k.startswith(nm + ".")},
+                                           carry={k: v for k, v in start.items() if "." in k},
                                            fitter=s.fit, two_stage=False)
             except (EffectError, FitError):
                 continue
