@@ -23,10 +23,14 @@ def _plan(effects, **values):
 
 def test_plan_uses_what_has_an_inverse_and_names_the_rest():
     comp = _plan(["creep", "drift", "dynamics", "hum"], creep__gain=0.01, dynamics__fn=350.0, dynamics__zeta=0.04)
-    assert comp.names == ["creep", "dynamics"]
-    assert set(comp.unused) == {"drift", "hum"}
-    assert "clock" in comp.unused["drift"] and "user effect" in comp.unused["hum"]
-    assert "compensating creep" in comp.describe() and "not compensated: drift" in comp.describe()
+    assert comp.names == ["creep", "drift", "dynamics"]
+    assert set(comp.unused) == {"hum"}
+    assert "user effect" in comp.unused["hum"]
+    assert "compensating creep, drift, dynamics" in comp.describe() and "not compensated: hum" in comp.describe()
+    # drift is estimated from the sensor: the open-loop inverse cannot use it, and says so
+    assert comp.sensor_only == ["drift"]
+    ol = comp.describe("open_loop")
+    assert "compensating creep, dynamics" in ol and "drift: estimated from the sensor" in ol
 
 
 def test_plan_refuses_missing_out_of_range_and_uninvertible_effects():
@@ -75,6 +79,27 @@ def test_creep_compensated_from_the_identified_operator(alg):
     base = _track(alg, plant, None, ref="c1", seconds=3.0)
     comp = _track(alg, plant, _plan(["creep"], creep__gain=0.012), ref="c1", seconds=3.0)
     assert comp.rmse < base.rmse / 2, (base.rmse, comp.rmse)
+
+
+@pytest.mark.parametrize("alg", ["dppc", "dmrac"])
+def test_drift_removed_by_the_observer(alg):
+    """A drifting sensor offset (the sim's: ramp, thermal sine and random walk): without the drift term the laws
+    keep a share of the offset ((1 − δ1)·d for DPPC); with it they sit near the drift-free stage's level."""
+    plant = {"drift": 2e-7}
+    clean = _track(alg, {}, None, seconds=3.0)
+    base = _track(alg, plant, None, seconds=3.0)
+    comp = _track(alg, plant, _plan(["drift"]), seconds=3.0)
+    assert comp.finite and base.finite
+    assert comp.rmse < 0.5 * base.rmse, (base.rmse, comp.rmse)
+    assert comp.rmse < 1.5 * clean.rmse, (clean.rmse, comp.rmse)
+
+
+def test_drift_observer_is_not_fed_in_open_loop():
+    """Open loop reads no sensor: its drift estimate stays 0 and its commands equal the plain inverse's."""
+    plant = {"drift": 2e-7}
+    plain = _track("open_loop", plant, None)
+    comp = _track("open_loop", plant, _plan(["drift"]))
+    assert comp.rmse == pytest.approx(plain.rmse, rel=1e-9)
 
 
 def test_saturation_respected_as_a_limit():

@@ -12,8 +12,10 @@ the effects enter around them (:mod:`hyst_model.effects.online`):
 * a stage resonance after the hysteresis (series, held input) is inverted on the reference with the state the
   base model's prediction drives, and predicted out of the measurement (Smith); the stability check still judges
   the gains against the raw resonance (conservative: it holds if the compensation's model is off);
-* an effect without a per-sample form (drift: tied to the identification record's clock; the feedback
-  structure of dynamics; a user effect without :meth:`~hyst_model.effects.Effect.online`) is listed in
+* a drifting offset (input-independent, so nothing to invert) is estimated from the sensor by a disturbance
+  observer and removed from measurement and reference (the open-loop inverse reads no sensor: it cannot);
+* an effect without a per-sample form (the feedback structure of dynamics; a user effect without
+  :meth:`~hyst_model.effects.Effect.online`) is listed in
   :attr:`Compensation.unused` with the reason, which the node logs and puts on ``/diagnostics``: never dropped
   silently.
 
@@ -82,10 +84,16 @@ class Compensation:
             x = e.target(x, u)
         return x
 
-    def measure(self, y: float, u: float) -> float:
-        """Measured output → base model output (advances the effects' states)."""
+    def measure(self, y: float, u: float, sensor: bool = True) -> float:
+        """Measured output → base model output (advances the effects' states).
+
+        ``sensor`` False: ``y`` is the law's own aim, not a reading (open loop); observers (drift) are not fed.
+        """
         for e in reversed(self.used):
             y = e.measure(y, u)
+        if sensor:
+            for e in self.used:
+                e.observe(y, u)
         return y
 
     def target(self, r: float, u: float) -> float:
@@ -94,14 +102,24 @@ class Compensation:
             r = e.target(r, u)
         return r
 
-    def describe(self) -> str:
-        """One sentence for logs and /diagnostics ('' when there is nothing to say)."""
+    @property
+    def sensor_only(self) -> list[str]:
+        """Effects estimated from the sensor (drift): the feedback laws use them, the open-loop inverse cannot."""
+        return [e.name for e in self.used if e.needs_sensor]
+
+    def describe(self, algorithm: str | None = None) -> str:
+        """One sentence for logs and /diagnostics ('' when there is nothing to say); ``algorithm`` "open_loop"
+        lists the sensor-only effects as not compensated."""
         parts = []
-        if self.used:
-            parts.append("compensating " + ", ".join(self.names)
+        blind = self.sensor_only if algorithm == "open_loop" else []
+        names = [n for n in self.names if n not in blind]
+        if names:
+            parts.append("compensating " + ", ".join(names)
                          + (f" (reference previewed {self.preview * 1e3:.3g} ms)" if self.preview > 0 else ""))
-        if self.unused:
-            parts.append("not compensated: " + "; ".join(f"{k}: {v}" for k, v in self.unused.items()))
+        unused = {**self.unused, **{n: "estimated from the sensor, which the open-loop inverse does not read"
+                                    for n in blind}}
+        if unused:
+            parts.append("not compensated: " + "; ".join(f"{k}: {v}" for k, v in unused.items()))
         return "; ".join(parts)
 
 
@@ -292,7 +310,7 @@ class Compensated:
             r_k = self._r_prev
         if math.isfinite(y_k):
             seen = self._r_aim if self._internal and math.isfinite(self._r_aim) else y_k
-            x = self.comp.measure(seen, u_prev)
+            x = self.comp.measure(seen, u_prev, sensor=not self._internal)
         else:
             x = y_k  # the law counts and holds on a bad sample
         u = inner.step(self.comp.target(r_k, u_prev), x)

@@ -412,6 +412,9 @@ class ControllerNode(AtomicParametersNode):
         if comp.unused:
             parts.append("the control laws do not compensate "
                          + "; ".join(f"{k} ({v})" for k, v in comp.unused.items()))
+        if comp.sensor_only:
+            parts.append(f"open_loop does not compensate {', '.join(comp.sensor_only)} (estimated from the sensor, "
+                         "which the open-loop inverse does not read)")
         if extra:
             parts.append(f"model parameters unknown to this node are not used ({', '.join(extra[:6])}"
                          f"{', ...' if len(extra) > 6 else ''})")

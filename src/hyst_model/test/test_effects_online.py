@@ -97,11 +97,33 @@ def test_delay_smith_predictor_sees_the_undelayed_stage(side):
 
 
 def test_effects_without_online_form_say_why():
-    for name, cfg in (("drift", {}), ("dynamics", {"dynamics.structure": "feedback"}),
-                      ("dynamics", {"dynamics.hold": "foh"})):
+    for name, cfg in (("dynamics", {"dynamics.structure": "feedback"}), ("dynamics", {"dynamics.hold": "foh"})):
         eff = EFFECTS[name](dict(CFG, **cfg))
         assert eff.online(np.array([p.default for p in eff.params()]), base=lambda: MBWStepper(pea_default())) is None
         assert len(eff.online_note) > 20
+
+
+def test_drift_observer_estimates_the_offset_from_the_sensor():
+    """A ramp plus a step of the sensor offset on a perfect base model: the estimate follows it with the
+    observer's lag (r·τ on a ramp), target and measurement both lose it, and a bad sample is refused."""
+    from hyst_model.effects.drift import OBSERVER_TAU, DriftObserver
+
+    t, u, x = _record()
+    d = 40e-9 * t + np.where(t > 1.0, 30e-9, 0.0)  # 40 nm/s and a 30 nm jump at 1 s
+    obs = EFFECTS["drift"](CFG).online(np.zeros(5), base=lambda: MBWStepper(pea_default()))
+    assert isinstance(obs, DriftObserver) and obs.needs_sensor
+    obs.reset(float(x[0] + d[0]), float(u[0]))
+    est = np.empty_like(t)
+    for k, (yk, uk) in enumerate(zip(x + d, u)):
+        obs.observe(obs.measure(float(yk), float(uk)), float(uk))
+        est[k] = obs.offset
+    late = t > 1.0 + 8 * OBSERVER_TAU  # settled after the jump
+    np.testing.assert_allclose(est[late], d[late] - 40e-9 * OBSERVER_TAU, atol=0.3e-9)
+    assert obs.target(5e-6, 75.0) == pytest.approx(5e-6 - obs.offset)
+    before = obs.offset
+    obs.measure(float("nan"), 75.0)
+    obs.observe(float("nan"), 75.0)
+    assert obs.offset == before
 
 
 @pytest.mark.parametrize("fn,zeta,part,lag", [(350.0, 0.04, 1.0, 0.0), (800.0, 0.1, 1.0, 0.0),

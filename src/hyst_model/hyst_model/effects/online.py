@@ -8,7 +8,9 @@ them: each effect that supports it returns an :class:`OnlineEffect` from :meth:`
   for the innermost effect), advancing the effect's own state with the sample (creep lags, delay buffers);
 * the **target**: the inner value that makes the measured output equal the reference (the effect inverted on the
   reference), without advancing any state;
-* the **reachable range** of the measured output (a saturating stage cannot be asked beyond its limit).
+* the **reachable range** of the measured output (a saturating stage cannot be asked beyond its limit);
+* an **observation** hook: the base-level value the measurement became, for an effect that must be estimated from
+  the sensor rather than inverted (drift: an input-independent offset, tracked by a disturbance observer).
 
 The controller then runs its law on the inner values, so a creep, a bent loop or a saturating stroke is
 compensated by inversion, and a transport delay by a Smith predictor (the inner value is the measurement plus the
@@ -38,6 +40,9 @@ class OnlineEffect:
     name: str = "effect"
     #: Seconds of reference preview the compensation needs (a delay's τ); 0 for static and causal effects.
     preview: float = 0.0
+    #: True for an effect estimated from the sensor (an observer): the open-loop inverse, which reads no
+    #: sensor, cannot use it.
+    needs_sensor: bool = False
 
     def reset(self, y: float, u: float) -> None:
         """Start at rest: measured output ``y`` (m) held under input ``u`` (V)."""
@@ -53,6 +58,13 @@ class OnlineEffect:
     def bounds(self) -> tuple[float, float]:
         """Reachable range of this effect's output (m); ``(-inf, inf)`` when unbounded."""
         return (-math.inf, math.inf)
+
+    def observe(self, x: float, u: float) -> None:
+        """After a measurement went through every effect: ``x`` (m) is the base-level value the law will see.
+
+        An observer (drift) compares it with its own base-model prediction for input ``u``; the others ignore
+        it. Not called when the law runs on its own aim instead of the sensor (open loop).
+        """
 
 
 class Stepper(Protocol):
