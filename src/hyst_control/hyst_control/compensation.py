@@ -212,7 +212,8 @@ def effect_parameters(dt: float, u_scale: float, y_scale: float) -> dict[str, tu
     out: dict[str, tuple[object, str]] = {}
     for name in sorted(EFFECTS):
         cls = EFFECTS[name]
-        variants = cls.variants() if hasattr(cls, "variants") else [{}]
+        # the plain configuration first: a key's default must be what a params file without it means
+        variants = [{}] + (list(cls.variants()) if hasattr(cls, "variants") else [])
         for var in variants:
             e = cls({**base, **var})
             for p in e.params():
@@ -308,13 +309,17 @@ class Compensated:
         u_prev = inner.last_command
         if not math.isfinite(r_k):
             r_k = self._r_prev
+        # The reference this measurement answers (passed preview + 1 samples ago): open loop's stand-in for y_k.
+        # (Taking the aim of the sample before lagged the effect states one sample behind the model: the
+        # open-loop inverse with creep was 8 nm off its own model on a 10 Hz sine.)
+        aim = self._passed[-1]
         if math.isfinite(y_k):
-            seen = self._r_aim if self._internal and math.isfinite(self._r_aim) else y_k
+            seen = aim if self._internal and math.isfinite(aim) else y_k
             x = self.comp.measure(seen, u_prev, sensor=not self._internal)
         else:
             x = y_k  # the law counts and holds on a bad sample
         u = inner.step(self.comp.target(r_k, u_prev), x)
-        self._r_aim = self._passed[-1]
+        self._r_aim = aim
         self._passed.appendleft(r_k)
         self._r_prev, self._y_prev = r_k, y_k
         return u

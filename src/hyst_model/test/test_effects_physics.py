@@ -199,7 +199,8 @@ def test_asymmetry_kink_bends_the_gain_at_one_level_its_start_finds_it_and_the_i
     inv = a.online(np.array([-0.2, 1.0e-5]))
     back = np.array([inv.measure(float(v), 0.0) for v in y])
     np.testing.assert_allclose(back, x, atol=1e-15)
-    assert "form" not in Asymmetry(CFG).config()            # params files of the quadratic form stay as they were
+    # a file without the key reads as the quadratic, and files now say so (a node declares the key with a default)
+    assert Asymmetry(CFG).form == "quadratic" and Asymmetry(CFG).config()["form"] == "quadratic"
     assert Asymmetry(CFG).form == "quadratic"
     with pytest.raises(EffectError):
         Asymmetry(dict(CFG, **{"asymmetry.form": "cubic"}))

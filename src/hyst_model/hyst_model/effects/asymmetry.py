@@ -96,9 +96,11 @@ class Asymmetry(Effect):
                 Param("a_y", 0.0, -0.5, 0.5, "", "quadratic term in the hysteretic output, per output unit²"))
 
     def config(self):
-        out: dict[str, float | str] = {"u_c": self.u_c, "y_c": self.y_c}
-        if self.form == "kink":  # a quadratic file stays as it was written before the kink existed
-            out.update(form=self.form, y_lo=self.y_lo, y_hi=self.y_hi)
+        # the form always: a node declares every effect key with a default, and a quadratic file without it was
+        # read as the declared default (the kink), which left the asymmetry uncompensated
+        out: dict[str, float | str] = {"u_c": self.u_c, "y_c": self.y_c, "form": self.form}
+        if self.form == "kink":
+            out.update(y_lo=self.y_lo, y_hi=self.y_hi)
         return out
 
     def output(self, theta, t, u, y):
