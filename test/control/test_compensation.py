@@ -222,3 +222,19 @@ def test_open_loop_inverts_its_own_extended_model_exactly(case, freq):
     e = r.y - r.r
     e = e - np.polyval(np.polyfit(r.t, e, 2), r.t)
     assert np.sqrt(np.mean(e[1:] ** 2)) < 1e-10, np.sqrt(np.mean(e[1:] ** 2))  # 0.1 nm; the stale aim: 8 nm
+
+
+def test_open_loop_creep_memory_follows_the_applied_start():
+    """The start fades the first command's bump out; the stage's slow creep lags remember that course. Open
+    loop's effect states follow the model driven by the applied command (:attr:`OpenLoop.applied_shift`), not the
+    aim: the offset the start leaves is small (it was 11 nm when they followed the aim)."""
+    import numpy as np
+
+    vals = {k: v for k, (v, _) in effect_parameters(DT, 15.0, 5.42e-6).items() if k.startswith("creep.")}
+    vals.update(_EXACT_CASES["creep"])
+    comp = plan_compensation(pea_default(), ["creep"], vals, vals, DT)
+    c = make_controller("open_loop", pea_default(), DT, compensation=comp)
+    plant = _ModelPlant(["creep"], vals, vals)
+    r = run_closed_loop(c, "sine:10:6", 0.25, plant=plant, settle=0.5)
+    assert r.finite
+    assert abs(float(np.mean(r.y - r.r))) < 3e-9, float(np.mean(r.y - r.r))

@@ -314,7 +314,9 @@ class Compensated:
         # open-loop inverse with creep was 8 nm off its own model on a 10 Hz sine.)
         aim = self._passed[-1]
         if math.isfinite(y_k):
-            seen = aim if self._internal and math.isfinite(aim) else y_k
+            # open loop: the aim, moved by what the model says the applied command did beyond it (the start's
+            # faded bump, a limited command), so slow effect memory (creep lags) follows the stage's course
+            seen = aim + getattr(inner, "applied_shift", 0.0) if self._internal and math.isfinite(aim) else y_k
             x = self.comp.measure(seen, u_prev, sensor=not self._internal)
         else:
             x = y_k  # the law counts and holds on a bad sample

@@ -137,9 +137,21 @@ class OpenLoop(ModelBased):
             raise ConfigError("bump_tau must be positive")
         self._fade = math.exp(-dt / bump_tau)
         self._ym_state = 0.0
+        self._ym_applied = 0.0  # the model driven by the command applied (bump and limiter included)
+        self._ua = 0.0
         self._nu = 0.0
         self._uff = 0.0
         self._bump = math.nan
+
+    @property
+    def applied_shift(self) -> float:
+        """What the model says the stage does beyond what the feedforward assumed (m): the response to the faded
+        bump and to what the limiter took off. Zero once both are over and the model's memory has forgotten them.
+
+        The law advances its model with the feedforward alone (so the bump fades instead of being cancelled);
+        effects with slow memory (creep) must follow the stage's actual course, which this shift supplies
+        (:class:`hyst_control.compensation.Compensated`)."""
+        return (self._ym_applied - self._ym_state) * self._ys
 
     def sync_applied(self, u_applied: float) -> None:
         """Open loop follows its own model, not the measured side: nothing to synchronise."""
@@ -147,10 +159,11 @@ class OpenLoop(ModelBased):
     def _rescale(self, old: MBWParams, new: MBWParams) -> None:
         """The model's predicted position, in the new model units (the same metres)."""
         self._ym_state = self._pos(self._ym_state, old, new)
+        self._ym_applied = self._pos(self._ym_applied, old, new)
 
     def _on_reset(self, y0: float, u0: float, r0: float) -> None:
-        self._ym_state = self._ym(y0)
-        self._uff = u0
+        self._ym_state = self._ym_applied = self._ym(y0)
+        self._uff = self._ua = u0
         self._bump = math.nan  # measured at the first step
 
     def _law(self, r_k: float, y: float) -> float:
@@ -174,6 +187,10 @@ class OpenLoop(ModelBased):
         u_ff = u - self._bump  # what the feedforward actually got through the limiter
         self._ym_state = mbw_step(self._p, self._ym_state, u_ff / self._us, self._uff / self._us)
         self._uff = u_ff
+        ya = mbw_step(self._p, self._ym_applied, u / self._us, self._ua / self._us)
+        # a diverged prediction must not poison the shift; it falls back to the feedforward's course
+        self._ym_applied = ya if math.isfinite(ya) else self._ym_state
+        self._ua = u
 
     def state(self) -> dict[str, float]:
         s = super().state()

@@ -127,15 +127,16 @@ def test_watchdog_commands_v_safe_and_reports_error(harness):
 
 
 def test_effects_of_a_params_file_are_compensated_or_reported_never_silently_dropped(harness, tmp_path):
-    """Creep and delay have inverses (compensated); drift and an unknown effect's keys are named on /diagnostics."""
+    """Creep and delay have inverses, drift an observer (compensated; open loop cannot use the observer, said);
+    an unknown effect's keys are named on /diagnostics."""
     p = tmp_path / "stage.yaml"
     p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      effects: [creep, delay, drift]\n"
                  "      zeta1: 0.45\n      y_scale: 5.0e-06\n      dt: 0.001\n"
                  "      creep:\n        gain: 0.01\n        tilt: 0.0\n      delay:\n        tau: 0.002\n"
                  "      drift:\n        c1: 1.0e-8\n      hum:\n        amp: 1.0e-9\n")
     node, peer, ex, pub, got = harness("--params-file", str(p))
-    assert node._compensating == ["creep", "delay"]
-    assert "drift" in node._unused and "model.hum.amp" in node._unused
+    assert node._compensating == ["creep", "delay", "drift"]
+    assert "open_loop does not compensate drift" in node._unused and "model.hum.amp" in node._unused
     assert "creep" not in node._unused
     assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
     for k in range(3):
@@ -145,8 +146,8 @@ def test_effects_of_a_params_file_are_compensated_or_reported_never_silently_dro
     assert getattr(node._ctrl, "preview", 0.0) == pytest.approx(0.002)  # the delay's preview
 
     def warned() -> bool:
-        return any(s.level >= DiagnosticStatus.WARN and "do not compensate drift" in s.message
-                   and any(v.key == "compensated" and v.value == "creep,delay" for v in s.values)
+        return any(s.level >= DiagnosticStatus.WARN and "open_loop does not compensate drift" in s.message
+                   and any(v.key == "compensated" and v.value == "creep,delay,drift" for v in s.values)
                    for d in got["diag"] for s in d.status)
 
     assert _spin_until(ex, warned, 5.0)
