@@ -61,7 +61,7 @@ def track(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=N
     from hyst_control.compensation import from_params
     from hyst_control.errors import ControlError
     from hyst_bringup.loop import run_closed_loop
-    from hyst_control.controllers import make_controller, mismatched
+    from hyst_control.controllers import make_supervised, mismatched
     from hyst_control.reference import parse_reference
 
     model, comp = from_params(spec, 1.0 / RATE)
@@ -78,7 +78,8 @@ def track(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=N
         default = {"dppc": DPPCGains(), "dmrac": DMRACGains(), "pid": PIDGains()}[alg]
         v_range = (limits.v_min, limits.v_max) if limits is not None else (0.0, 150.0)
         gains = guard(alg, default, model, 1.0 / RATE, res, v_range=v_range).gains
-    c = make_controller(alg, model, 1.0 / RATE, limits=limits, gains=gains, compensation=comp)
+    # as the node runs it: the command watched, the law derated if it rings on a mode the model does not know
+    c = make_supervised(alg, model, 1.0 / RATE, limits=limits, gains=gains, compensation=comp)
     try:
         plant = _plant(scenario, seed) if isinstance(scenario, str) else scenario(seed)
         r = run_closed_loop(c, ref, seconds, plant=plant, settle=0.5)

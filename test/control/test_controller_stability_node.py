@@ -120,6 +120,25 @@ def test_node_derates_on_the_identified_resonance_and_stays_stable(harness, algo
     assert {"stability", "spectral_radius", "gain_margin", "derated"} <= {kv.key for kv in st.values}
 
 
+@pytest.mark.parametrize("algorithm", ["dppc", "dmrac"])
+def test_node_derates_a_resonance_its_model_does_not_know(harness, algorithm):
+    """No model.dynamics: nothing to check at start; the default gains ring on the 350 Hz mode, the node's
+    oscillation watch derates the law (bumpless hand-over), the loop settles and /diagnostics says why."""
+    node, ex, pub, got = harness("-p", f"algorithm:={algorithm}", "-p", "reference:=sine:10")
+    assert node._settings.stability.running is None  # no resonance known: nothing checked at start
+    e = _lockstep(node, ex, pub, got, _resonant_plant(), 3000)
+    assert e.size == 3000 and np.all(np.isfinite(e))
+    tail = np.sqrt(np.mean(e[-1000:] ** 2))
+    assert tail < 0.5e-6, tail
+    assert node.counts["oscillations"] >= 1 and node._ctrl.level >= 1
+
+    def warned() -> bool:
+        return any(s.level == DiagnosticStatus.WARN and "oscillates" in s.message and "derated" in s.message
+                   for a in got["diag"] for s in a.status)
+
+    assert _spin_until(ex, warned, 5.0)
+
+
 def test_under_policy_warn_the_configured_gains_run_and_the_loop_is_unstable(harness):
     """The counter-test: the same node and stage with the check's advice ignored."""
     node, ex, pub, got = harness("-p", "reference:=sine:10", "-p", "stability.policy:=warn", *RES)

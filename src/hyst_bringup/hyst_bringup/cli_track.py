@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 from hyst_control.compensation import Compensation, from_params
-from hyst_control.controllers import ALGORITHMS, CONTROLLERS, make_controller, mismatched
+from hyst_control.controllers import ALGORITHMS, CONTROLLERS, make_controller, make_supervised, mismatched
 from hyst_control.errors import ConfigError
 from hyst_control.reference import parse_reference
 from hyst_control.stability import Resonance, guard, identified_resonance
@@ -185,10 +185,15 @@ def run(args: argparse.Namespace) -> int:
         gains = stab.gains
         if stab.warn:
             print(f"hyst track: warning: {stab.message}", file=sys.stderr)
-    ctrl = make_controller(args.algorithm, model, 1.0 / args.rate, gains=gains, initial=args.initial,
-                           compensation=comp)
+    ctrl = make_supervised(args.algorithm, model, 1.0 / args.rate, gains=gains, initial=args.initial,
+                           compensation=comp, act=args.stability != "warn")
     res = run_closed_loop(ctrl, ref, args.seconds, plant=plant)
     out = res.summary()
+    if ctrl.events:  # the oscillation watch derated the law (a mode the model does not know)
+        out.update(oscillation=list(ctrl.events))
+        if not args.json:
+            for msg in ctrl.events:
+                print(f"hyst track: warning: {msg}", file=sys.stderr)
     if stab is not None and stab.running is not None:
         out.update(stability=stab.message, spectral_radius=stab.running.spectral_radius,
                    derated={n: b for n, _, b in stab.derated})

@@ -19,7 +19,7 @@ integrator preloaded), and the slew limit bounds whatever step is left.
 from __future__ import annotations
 
 import math
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numba import njit
@@ -277,10 +277,11 @@ class ModelBased(BaseController):
         return (y - self._off) / self._ys
 
 
-def hand_over(new: BaseController, old: BaseController | None, y: float, r: float | None = None) -> BaseController:
+def hand_over(new: Any, old: Any | None, y: float, r: float | None = None) -> Any:
     """Bumpless transfer: start ``new`` from ``old``'s last command and reference and the measurement ``y``.
 
-    With no previous controller (or one that never ran), ``new`` starts from ``v_safe``.
+    With no previous controller (or one that never ran), ``new`` starts from ``v_safe``. Either may be a bare
+    law or one wrapped (compensated, supervised): anything with the controller protocol and the memory properties.
     """
     if old is not None and math.isfinite(old.last_command):
         u0 = old.last_command

@@ -41,6 +41,7 @@ from .compensation import effect_parameters
 from .dmrac import TABLE53
 from .errors import ControlError
 from .controllers import ALGORITHMS, make_controller
+from .supervisor import Supervised
 from .reference import parse_reference
 from .controller_settings import GAINS, MODEL_KEYS, ControllerSettings, cached_guard, profile_model
 from .stability import POLICIES, StabilityVerdict, identified_resonance
@@ -72,8 +73,10 @@ class ControllerNode(AtomicParametersNode):
         self._ref: tuple[float, float, float] | None = None  # (t_stamp, r, rdot)
         self._last_state_wall: float | None = None
         self._tripped = False
-        self._n = dict.fromkeys(("states", "commands", "bad_states", "bad_refs", "watchdog_trips", "switches", "gaps"),
-                                0)
+        self._n = dict.fromkeys(("states", "commands", "bad_states", "bad_refs", "watchdog_trips", "switches", "gaps",
+                                 "oscillations"), 0)
+        self._n_osc = 0           # oscillation-watch events of the running law already reported
+        self._oscillation = ""    # the newest of them, kept on /diagnostics
         self._t_last: float | None = None  # stamp of the previous state
         self._t0: float | None = None  # first state stamp (internal reference time origin)
         self._pending = math.nan  # reference targeted by the last command: compared with the next sample
@@ -232,9 +235,30 @@ class ControllerNode(AtomicParametersNode):
             c.set_gains(new.gains(new.algorithm))
         self.get_logger().info("parameters applied: " + ", ".join(p.name for p in params))
 
+    def _build(self, s: ControllerSettings) -> Supervised:
+        """The law of ``s``, watched for oscillation (:mod:`hyst_control.supervisor`): rebuilt derated if it
+        rings on a mode the model does not know (only reported under ``stability.policy: warn``)."""
+        def make(alg: str, gains):  # at rebuild time: the settings then in force (a model push since, ...)
+            cur = self._settings
+            return make_controller(alg, cur.model, 1.0 / cur.rate, cur.limits, gains, cur.dmrac_initial,
+                                   cur.compensation())
+
+        act = str(self.get_parameter("stability.policy").value) != "warn"
+        return Supervised(make(s.algorithm, s.gains(s.algorithm)), s.algorithm, s.gains(s.algorithm), make,
+                          1.0 / s.rate, (s.limits.v_min, s.limits.v_max), act)
+
+    def _report_oscillation(self) -> None:
+        """Log and keep for /diagnostics what the oscillation watch did since the last sample."""
+        events = getattr(self._ctrl, "events", ())
+        for msg in events[self._n_osc:]:
+            self.get_logger().warning(msg)
+            self._oscillation = msg
+            self._n["oscillations"] += 1
+        self._n_osc = len(events)
+
     def _switch(self, s: ControllerSettings) -> None:
-        new = make_controller(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial,
-                              s.compensation())
+        new = self._build(s)
+        self._n_osc = 0
         self._ctrl = hand_over(new, self._ctrl, self._y) if math.isfinite(self._y) else None
         self._n["switches"] += 1
         self._skip = int(0.25 * s.rate)
@@ -288,8 +312,8 @@ class ControllerNode(AtomicParametersNode):
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         if self._ctrl is None or self._tripped:
             u0 = _F(msg.effort[0]) if msg.effort and math.isfinite(msg.effort[0]) else s.limits.v_safe
-            c = make_controller(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial,
-                                s.compensation())
+            c = self._build(s)
+            self._n_osc = 0
             c.reset(y, u0, y if self._ref is None and s.reference is None else self._target(t, y))
             self._ctrl = c
             self._skip = int(0.25 * s.rate)
@@ -317,6 +341,8 @@ class ControllerNode(AtomicParametersNode):
         ahead = float(getattr(self._ctrl, "preview", 0.0))
         u = self._ctrl.step(self._target(t, y, ahead) if ahead > 0 else r, y)
         self._publish_command(msg.header.stamp, u)
+        if len(getattr(self._ctrl, "events", ())) != self._n_osc:
+            self._report_oscillation()
         if self._n["commands"] % s.state_decimation == 0:
             st = self._ctrl.state()
             out = JointState()
@@ -360,6 +386,9 @@ class ControllerNode(AtomicParametersNode):
         if self._unused:  # whatever else is going on, the dropped model terms stay visible
             st.level = max(st.level, DiagnosticStatus.WARN)
             st.message += f"; {self._unused}"
+        if self._oscillation:  # the oscillation watch derated the law (or, under policy warn, only saw it)
+            st.level = max(st.level, DiagnosticStatus.WARN)
+            st.message += f"; {self._oscillation}"
         stab = self._settings.stability
         if stab is not None and stab.warn:  # derated (or running unstable gains under policy warn)
             st.level = max(st.level, DiagnosticStatus.WARN)

@@ -22,7 +22,8 @@ from .dppc import DPPC, DPPCGains
 from .errors import ConfigError, ControlError
 from .pid import PID, OpenLoop, PIDGains
 
-__all__ = ["Law", "CONTROLLERS", "ALGORITHMS", "gain_table", "make_controller", "parse_schedule", "mismatched"]
+__all__ = ["Law", "CONTROLLERS", "ALGORITHMS", "gain_table", "make_controller", "make_supervised", "parse_schedule",
+           "mismatched"]
 
 
 @dataclass(frozen=True)
@@ -88,6 +89,23 @@ def make_controller(algorithm: str, model: MBWParams, dt: float, limits: Command
     if law is None:
         raise ConfigError(f"unknown algorithm {algorithm!r}; choose one of {', '.join(ALGORITHMS)}")
     return wrap(law.cls.create(model, dt, limits or PEA_LIMITS, gains, initial), compensation)
+
+
+def make_supervised(algorithm: str, model: MBWParams, dt: float, limits: CommandLimits | None = None,
+                    gains=None, initial="model", compensation: Compensation | None = None, act: bool = True):
+    """:func:`make_controller` wrapped in a :class:`~hyst_control.supervisor.Supervised` oscillation watch that
+    rebuilds it with derated gains (same model, limits, compensation) when the command rings."""
+    from .supervisor import Supervised
+
+    lim = limits or PEA_LIMITS
+    law = make_controller(algorithm, model, dt, lim, gains, initial, compensation)
+    if gains is None and CONTROLLERS[algorithm].gains is not None:
+        gains = law.gains
+
+    def rebuild(alg: str, g):
+        return make_controller(alg, model, dt, lim, g, initial, compensation)
+
+    return Supervised(law, algorithm, gains, rebuild, dt, (lim.v_min, lim.v_max), act)
 
 
 def parse_schedule(text: str) -> list[tuple[str, float]]:
