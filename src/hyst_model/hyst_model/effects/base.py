@@ -92,6 +92,12 @@ class Effect:
     #: Base parameters a kind-``base`` effect still reads (None: all of them). An effect that replaces the
     #: base recursion outright lists only those it keeps (e.g. ``("offset",)``), so fitters skip the rest.
     base_params_used: tuple[str, ...] | None = None  # an instance may set it (the dynamics effect's feedback)
+    #: A linear time-invariant operator on its inner signal (at rest at the start): it commutes with any other
+    #: such effect, so the controllers may apply their inverses in another order (creep, a delay, a series mode).
+    linear: bool = False
+    #: Its per-sample form (:meth:`online`) predicts with the base model, so it is exact only directly on the base
+    #: (a Smith predictor, the series resonance): the controllers move it inward past linear effects.
+    on_base: bool = False
     #: Why the controllers cannot use this effect, shown when :meth:`online` returns None.
     online_note: ClassVar[str] = "it has no per-sample form (Effect.online), so the controllers cannot compensate it"
 

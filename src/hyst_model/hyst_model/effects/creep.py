@@ -75,6 +75,7 @@ class Creep(Effect):
     physics = ("After a step the stage keeps moving for seconds to minutes, about the same amount per decade of "
                "time; modelled as first-order lags with time constants 0.01-300 s acting on the displacement.")
     kind = "output"
+    linear = True  # x − g·N·Σ w_i (x − lag_i(x)): lags at rest
 
     def params(self):
         return (Param("gain", 0.0, -0.1, 0.3, "1/decade", "creep per decade of time, fraction of a step"),

@@ -45,6 +45,8 @@ class Delay(Effect):
             raise EffectError(f"delay.side must be one of {', '.join(SIDES)}, not {side!r}")
         self.side = side
         self.kind = side  # instance attribute: where this delay acts
+        self.linear = True   # a shift in time, input or output side
+        self.on_base = True  # its Smith predictor runs the base model
 
     @staticmethod
     def variants() -> list[dict[str, str]]:

@@ -137,6 +137,8 @@ class DynamicsEffect(Effect):
         # tell ComposedModel (and the fitters) so.
         self.kind = "base" if self.structure == "feedback" else "wrap"
         self.base_params_used = ("offset",) if self.structure == "feedback" else None
+        self.linear = self.structure == "series"  # a linear filter after the hysteresis
+        self.on_base = True  # the series inverse drives its state with the base model's prediction
         self._ufine_cache: tuple | None = None
 
     def config(self) -> dict[str, float | str]:
