@@ -75,3 +75,19 @@ def test_policy_warn_only_reports():
     r = run_closed_loop(c, "sine:10", 1.0, plant=default_plant(RATE, seed=3, dynamics=520.0), settle=0.5)
     assert c.events and "gains kept" in c.events[0] and c.level == 0
     assert not r.finite or r.rmse > 1e-6
+
+
+def test_a_command_swinging_on_purpose_with_a_smooth_output_is_not_an_oscillation():
+    """A resonance inverted on the reference makes the command swing at the mode's frequency while the output
+    stays smooth: with the output watched too (y_span given) that is not flagged; a swinging output is."""
+    t = np.arange(int(1 * RATE)) * DT
+    u = 75 + 3.0 * np.sin(2 * np.pi * 520 * t)
+    smooth = 15e-6 + 5e-6 * np.sin(2 * np.pi * 10 * t) + np.random.default_rng(1).normal(0, 2e-9, t.size)
+    ringing = smooth + 0.3e-6 * np.sin(2 * np.pi * 520 * t)
+
+    def flags(y):
+        m = OscillationMonitor(DT, (0.0, 150.0), y_span=30e-6)
+        return any(m.update(float(a), float(b)) for a, b in zip(u, y))
+
+    assert not flags(smooth)
+    assert flags(ringing)

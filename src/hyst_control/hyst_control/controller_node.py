@@ -41,7 +41,7 @@ from .compensation import effect_parameters
 from .dmrac import TABLE53
 from .errors import ControlError
 from .controllers import ALGORITHMS, make_controller
-from .supervisor import Supervised
+from .supervisor import Supervised, output_span
 from .reference import parse_reference
 from .controller_settings import GAINS, MODEL_KEYS, ControllerSettings, cached_guard, profile_model
 from .stability import POLICIES, StabilityVerdict, identified_resonance
@@ -244,8 +244,9 @@ class ControllerNode(AtomicParametersNode):
                                    cur.compensation())
 
         act = str(self.get_parameter("stability.policy").value) != "warn"
+        v_range = (s.limits.v_min, s.limits.v_max)
         return Supervised(make(s.algorithm, s.gains(s.algorithm)), s.algorithm, s.gains(s.algorithm), make,
-                          1.0 / s.rate, (s.limits.v_min, s.limits.v_max), act)
+                          1.0 / s.rate, v_range, act, output_span(s.model, v_range))
 
     def _report_oscillation(self) -> None:
         """Log and keep for /diagnostics what the oscillation watch did since the last sample."""

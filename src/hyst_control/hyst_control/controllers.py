@@ -95,7 +95,7 @@ def make_supervised(algorithm: str, model: MBWParams, dt: float, limits: Command
                     gains=None, initial="model", compensation: Compensation | None = None, act: bool = True):
     """:func:`make_controller` wrapped in a :class:`~hyst_control.supervisor.Supervised` oscillation watch that
     rebuilds it with derated gains (same model, limits, compensation) when the command rings."""
-    from .supervisor import Supervised
+    from .supervisor import Supervised, output_span
 
     lim = limits or PEA_LIMITS
     law = make_controller(algorithm, model, dt, lim, gains, initial, compensation)
@@ -105,7 +105,8 @@ def make_supervised(algorithm: str, model: MBWParams, dt: float, limits: Command
     def rebuild(alg: str, g):
         return make_controller(alg, model, dt, lim, g, initial, compensation)
 
-    return Supervised(law, algorithm, gains, rebuild, dt, (lim.v_min, lim.v_max), act)
+    return Supervised(law, algorithm, gains, rebuild, dt, (lim.v_min, lim.v_max), act,
+                      output_span(model, (lim.v_min, lim.v_max)))
 
 
 def parse_schedule(text: str) -> list[tuple[str, float]]:

@@ -12,7 +12,12 @@ limits at the mode's frequency. Commercial piezo controllers watch for this and 
   the limits reverses between its flat stretches just as often; tracking a 100 Hz sine reverses only every 10
   samples (beyond GAP), a step once, and sensor noise moves the command by far less than ``level`` — so
   ``share`` = 0.25 flags modes above about fs/8 (250 Hz at 2 kHz) and nothing a reference asks for. A ringing
-  loop that stays below its limits (a bounded limit cycle of a few volts) is caught too.
+  loop that stays below its limits (a bounded limit cycle of a few volts) is caught too. The measured output must
+  swing the same way (increments above 0.1 % of the stage's range, :func:`output_span`): a command may swing on
+  purpose — an identified resonance inverted on the reference excites the mode's frequency to cancel it, and was
+  taken for an oscillation (derated χ 0.93 → 0.98: 40 nm instead of 4 nm on a 30 Hz sine) — and then the output
+  stays smooth, while a ringing loop moves the stage by micrometres. Slower instabilities (below fs/8) are not
+  caught.
 * :class:`Supervised` wraps a law: on a flagged oscillation it rebuilds the law with derated gains (the
   derating direction of :func:`hyst_control.stability.derate`: DPPC χ and DMRAC a_m towards 0.995, PID gains
   down) at the next level of :data:`LEVELS`, hands over bumplessly and records the event (the node warns on
@@ -30,7 +35,7 @@ from typing import Any
 from .base import hand_over
 from .stability import _DERATED, _candidate
 
-__all__ = ["OscillationMonitor", "Supervised", "LEVELS"]
+__all__ = ["OscillationMonitor", "Supervised", "LEVELS", "output_span"]
 
 #: Derating steps tried in turn, per law (t of :func:`hyst_control.stability._candidate`: 0 = as configured,
 #: 1 = χ, a_m at 0.995, PID gains / 10⁴): DPPC χ 0.1 → 0.55, 0.82, 0.995; PID gains / 3.2, 10, 100.
@@ -39,8 +44,43 @@ LEVELS = {"dppc": (0.5, 0.8, 1.0), "dmrac": (0.5, 0.8, 1.0), "pid": (0.125, 0.25
 #: fs/(2·GAP) (250 Hz at 2 kHz), clipped or not.
 GAP = 4
 
+def output_span(model, v_range: tuple[float, float]) -> float:
+    """The model's output range between the command limits at rest (m): the scale of an output swing."""
+    from hyst_model.effects.online import MBWStepper
+
+    m = MBWStepper(model)
+    return abs(m.reset(float(v_range[1])) - m.reset(float(v_range[0])))
+
+
+class _Reversals:
+    """Counts reversals of a signal's large increments (> ``thr``) within :data:`GAP` samples of the last one."""
+
+    def __init__(self, thr: float) -> None:
+        self.thr = thr
+        self.reset()
+
+    def reset(self) -> None:
+        self._x1 = math.nan
+        self._sign = 0.0   # sign of the last increment larger than thr
+        self._since = 0    # samples since it
+        self.count = 0
+
+    def update(self, x: float) -> None:
+        d = x - self._x1
+        self._since += 1
+        if math.isfinite(d) and abs(d) > self.thr:
+            sign = math.copysign(1.0, d)
+            # a clipped swing reverses between flat stretches at its limits: the reversal is between the last
+            # large increments, not adjacent samples
+            if sign != self._sign and self._sign != 0.0 and self._since <= GAP:
+                self.count += 1
+            self._sign, self._since = sign, 0
+        if math.isfinite(x):
+            self._x1 = x
+
+
 class OscillationMonitor:
-    """Flags a sustained high-frequency swing of the command (see the module docstring).
+    """Flags a sustained fast swing of the command and of the measured output (see the module docstring).
 
     Parameters
     ----------
@@ -48,47 +88,49 @@ class OscillationMonitor:
         Sample period (s).
     v_range : (float, float)
         Command limits (V); ``level`` is a fraction of their span.
-    level, window, share, windows
-        Threshold on |second difference| (fraction of the span), window length (s), share of samples above it
-        for a window to count, and windows in a row to flag.
+    y_span : float, optional
+        The output's range over ``v_range`` (m, from the model); with it the measured output must swing too
+        (by ``level_y`` of it): a command that swings on purpose — a resonance inverted on the reference excites
+        the mode's frequency to cancel it — leaves the output smooth. Without it only the command is watched.
+    level, level_y, window, share, windows
+        Increment thresholds (fractions of the spans), window length (s), share of samples with a reversal for
+        a window to count, and windows in a row to flag.
     """
 
-    def __init__(self, dt: float, v_range: tuple[float, float], level: float = 0.005, window: float = 0.02,
-                 share: float = 0.25, windows: int = 3) -> None:
+    def __init__(self, dt: float, v_range: tuple[float, float], y_span: float | None = None,
+                 level: float = 0.005, level_y: float = 0.001, window: float = 0.02, share: float = 0.25,
+                 windows: int = 3) -> None:
         span = float(v_range[1]) - float(v_range[0])
-        if not (dt > 0 and span > 0 and level > 0 and window > 0 and 0 < share <= 1 and windows >= 1):
-            raise ValueError("OscillationMonitor needs dt > 0, a non-empty v_range, level, window > 0, "
+        if not (dt > 0 and span > 0 and level > 0 and level_y > 0 and window > 0 and 0 < share <= 1
+                and windows >= 1):
+            raise ValueError("OscillationMonitor needs dt > 0, a non-empty v_range, levels and window > 0, "
                              "0 < share <= 1 and windows >= 1")
-        self._thr = level * span
+        self._cmd = _Reversals(level * span)
+        self._out = _Reversals(level_y * abs(y_span)) if y_span and math.isfinite(y_span) else None
         self._n = max(8, int(round(window / dt)))
         self._need = share * self._n
         self._windows = int(windows)
         self.reset()
 
     def reset(self) -> None:
-        self._u1 = math.nan
-        self._sign = 0.0   # sign of the last increment larger than the level
-        self._since = 0    # samples since it
-        self._count = self._i = self._run = 0
+        self._cmd.reset()
+        if self._out is not None:
+            self._out.reset()
+        self._i = self._run = 0
 
-    def update(self, u: float) -> bool:
-        """Take the newest command; True when an oscillation is confirmed (then the count starts afresh)."""
-        du = u - self._u1
-        self._since += 1
-        if math.isfinite(du) and abs(du) > self._thr:
-            sign = math.copysign(1.0, du)
-            # a reversal within GAP samples: a swing faster than fs/(2·GAP); a clipped swing reverses between
-            # flat stretches at its limits, so the reversal is between the last large increments, not adjacent ones
-            if sign != self._sign and self._sign != 0.0 and self._since <= GAP:
-                self._count += 1
-            self._sign, self._since = sign, 0
-        if math.isfinite(u):
-            self._u1 = u
+    def update(self, u: float, y: float = math.nan) -> bool:
+        """Take the newest command and measurement; True when an oscillation is confirmed (then it starts afresh)."""
+        self._cmd.update(u)
+        if self._out is not None:
+            self._out.update(y)
         self._i += 1
         if self._i < self._n:
             return False
-        self._run = self._run + 1 if self._count >= self._need else 0
-        self._count = self._i = 0
+        hit = self._cmd.count >= self._need and (self._out is None or self._out.count >= self._need)
+        self._run = self._run + 1 if hit else 0
+        self._cmd.count = self._i = 0
+        if self._out is not None:
+            self._out.count = 0
         if self._run >= self._windows:
             self._run = 0
             return True
@@ -114,16 +156,19 @@ class Supervised:
         Command limits (V).
     act : bool
         False: only record the oscillation (``stability.policy: warn``), keep the gains.
+    y_span : float, optional
+        The stage's output range over ``v_range`` (m): the measured output must swing too (see
+        :class:`OscillationMonitor`).
     """
 
     def __init__(self, law, algorithm: str, gains, rebuild: Callable[[str, Any], Any], dt: float,
-                 v_range: tuple[float, float], act: bool = True) -> None:
+                 v_range: tuple[float, float], act: bool = True, y_span: float | None = None) -> None:
         self.law = law
         self.algorithm = algorithm
         self.configured = gains
         self._rebuild = rebuild
         self._act = act
-        self.monitor = OscillationMonitor(dt, v_range)
+        self.monitor = OscillationMonitor(dt, v_range, y_span)
         self.level = 0
         #: What happened, one sentence per oscillation (for logs and /diagnostics).
         self.events: list[str] = []
@@ -156,7 +201,7 @@ class Supervised:
 
     def step(self, r_k: float, y_k: float) -> float:
         u = self.law.step(r_k, y_k)
-        if self.monitor.update(u):
+        if self.monitor.update(u, y_k):
             self._escalate(r_k, y_k)
         return u
 
