@@ -44,6 +44,7 @@ LEVELS = {"dppc": (0.5, 0.8, 1.0), "dmrac": (0.5, 0.8, 1.0), "pid": (0.125, 0.25
 #: fs/(2·GAP) (250 Hz at 2 kHz), clipped or not.
 GAP = 4
 
+
 def output_span(model, v_range: tuple[float, float]) -> float:
     """The model's output range between the command limits at rest (m): the scale of an output swing."""
     from hyst_model.effects.online import MBWStepper
