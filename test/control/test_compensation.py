@@ -42,6 +42,19 @@ def test_plan_refuses_missing_out_of_range_and_uninvertible_effects():
         _plan(["creep"], creep__gain=0.29)
 
 
+def test_a_resonance_without_an_inverse_is_reported_not_a_refusal_of_the_model():
+    """A diagnosed mode read a sample into the hold has no stable inverse: the model is still used (creep
+    compensated), the mode is named with the reason, and (the node, hyst track) the gains are checked against it."""
+    from hyst_control.stability import identified_resonance
+
+    vals = dict(creep__gain=0.01, dynamics__fn=797.0, dynamics__zeta=0.05, dynamics__part=1.0, dynamics__lag=1.0)
+    comp = _plan(["creep", "dynamics"], **vals)
+    assert comp.names == ["creep"] and "dynamics" in comp.unused
+    assert "feed-through" in comp.unused["dynamics"] and "gains are still checked" in comp.unused["dynamics"]
+    res = identified_resonance(["creep", "dynamics"], {k.replace("__", "."): v for k, v in vals.items()})
+    assert res is not None and res.fn == 797.0 and res.lag == 1.0
+
+
 def test_limits_set_on_the_wrapper_reach_the_law():
     from hyst_common.limits import CommandLimits
 

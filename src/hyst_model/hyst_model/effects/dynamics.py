@@ -228,10 +228,18 @@ class DynamicsEffect(Effect):
         return self.simulate_feedback(theta, t, u) + offset
 
     def online(self, theta, base=None):
+        """The series resonance's per-sample inverse, or None — with the reason in :attr:`online_note` — where
+        there is none: another structure or hold, or a mode read so late in the hold that its sampled zero leaves
+        the unit circle (a diagnosis can name such a mode: refusing the whole model for it left the controllers
+        nothing; the gains are still checked against the mode, :mod:`hyst_control.stability`)."""
         if self.structure != "series" or self.hold != "zoh" or base is None:
             return None
-        return SeriesResonanceInverse(float(theta[0]), float(theta[1]), self.dt, base, float(theta[2]),
-                                      float(theta[3]))
+        try:
+            return SeriesResonanceInverse(float(theta[0]), float(theta[1]), self.dt, base, float(theta[2]),
+                                          float(theta[3]))
+        except ValueError as err:
+            self.online_note = f"{err}; not inverted (the gains are still checked against it)"
+            return None
 
     # identification helpers -----------------------------------------------------------------------------
     def start(self, t, u, y, residual):
