@@ -47,12 +47,12 @@ def test_a_resonance_without_an_inverse_is_reported_not_a_refusal_of_the_model()
     compensated), the mode is named with the reason, and (the node, hyst track) the gains are checked against it."""
     from hyst_control.stability import identified_resonance
 
-    vals = dict(creep__gain=0.01, dynamics__fn=797.0, dynamics__zeta=0.05, dynamics__part=1.0, dynamics__lag=1.0)
+    vals = dict(creep__gain=0.01, dynamics__fn=797.0, dynamics__zeta=0.05, dynamics__part=1.0, dynamics__lag=0.5)
     comp = _plan(["creep", "dynamics"], **vals)
     assert comp.names == ["creep"] and "dynamics" in comp.unused
-    assert "feed-through" in comp.unused["dynamics"] and "gains are still checked" in comp.unused["dynamics"]
+    assert "unit circle" in comp.unused["dynamics"] and "gains are still checked" in comp.unused["dynamics"]
     res = identified_resonance(["creep", "dynamics"], {k.replace("__", "."): v for k, v in vals.items()})
-    assert res is not None and res.fn == 797.0 and res.lag == 1.0
+    assert res is not None and res.fn == 797.0 and res.lag == 0.5
 
 
 def test_limits_set_on_the_wrapper_reach_the_law():
@@ -203,6 +203,8 @@ _EXACT_CASES = {
     "delay": {"delay.tau": 0.0015, "delay.side": "input"},
     "delay-output": {"delay.tau": 0.001, "delay.side": "output"},
     "dynamics": {"dynamics.fn": 350.0, "dynamics.zeta": 0.05},
+    # read a whole sample into the hold: the lag-0 mode one sample later, inverted as such
+    "dynamics-lag1": {"dynamics.fn": 797.0, "dynamics.zeta": 0.05, "dynamics.lag": 1.0},
     # a resonance or a delay identified outside creep: applied directly on the base (they commute; 300 nm off)
     "creep+dynamics": {"creep.gain": 0.03, "creep.tilt": 0.1, "dynamics.fn": 350.0, "dynamics.zeta": 0.05},
     "creep+asymmetry": {"creep.gain": 0.03, "creep.tilt": 0.1,

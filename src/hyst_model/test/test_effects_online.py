@@ -166,12 +166,17 @@ def test_series_resonance_read_into_the_hold_may_have_no_inverse(lag, match):
     """With the whole motion through the mode and the sensor a period into the hold (lag 1, the textbook ZOH) the
     reading does not respond to x_k at all; at 0.3 of a period it does, but the sampled zero lies outside the
     unit circle (|z| 2.5 at 350 Hz, 2 kHz; stability.resonance_tf gives the same zero): both refused with the
-    reason, never a diverging inverse — the effect has then no per-sample form and says why (the controllers
+    reason, never a diverging inverse. At lag 1 the reading is the lag-0 mode one sample later: the effect inverts
+    it as that (reference previewed one sample); at 0.3 it has no per-sample form and says why (the controllers
     report it and still check their gains against the mode)."""
     from hyst_model.effects.dynamics import SeriesResonanceInverse
 
     with pytest.raises(ValueError, match=match):
         SeriesResonanceInverse(350.0, 0.04, CFG["dt"], lambda: MBWStepper(pea_default()), 1.0, lag)
     eff = EFFECTS["dynamics"](CFG)
-    assert eff.online(np.array([350.0, 0.04, 1.0, lag]), base=lambda: MBWStepper(pea_default())) is None
-    assert match in eff.online_note and "gains are still checked" in eff.online_note
+    inv = eff.online(np.array([350.0, 0.04, 1.0, lag]), base=lambda: MBWStepper(pea_default()))
+    if lag == 1.0:
+        assert isinstance(inv, SeriesResonanceInverse) and inv.preview == pytest.approx(CFG["dt"])
+    else:
+        assert inv is None
+        assert match in eff.online_note and "gains are still checked" in eff.online_note
