@@ -83,16 +83,22 @@ def test_bumpless_hand_over(first, second):
     assert np.all(np.isfinite(us))
 
 
+@pytest.mark.parametrize("watched", [False, True])
 @pytest.mark.parametrize(("first", "second"), list(itertools.permutations(ALGORITHMS, 2)))
-def test_switch_adds_no_tracking_error(first, second):
+def test_switch_adds_no_tracking_error(first, second, watched):
     """Every pair, tracking a 10 Hz sine on the exact model: the largest error in the 100 ms after the switch
     stays within 1.25× the larger of the old algorithm's level (the 0.5 s before) and the new one's own
     (0.2–0.5 s after), + 5 nm. Before the fix, X → open_loop held the last command for a sample and faded that
-    out: dppc → open_loop 8 → 260 nm, pid → open_loop 138 → 378 nm."""
+    out: dppc → open_loop 8 → 260 nm, pid → open_loop 138 → 378 nm. ``watched``: the laws wrapped as the node
+    runs them (oscillation watch); the command's course must reach the law inside (it stayed on the wrapper:
+    dmrac → open_loop 111 → 250 nm over topics)."""
+    from hyst_control.controllers import make_supervised
+
     ref = parse_reference("sine:10")
     plant = default_plant(2000.0)
-    a = make_controller(first, pea_default(), DT)
-    b = make_controller(second, pea_default(), DT)
+    make = make_supervised if watched else make_controller
+    a = make(first, pea_default(), DT)
+    b = make(second, pea_default(), DT)
     y = plant.reset(0.0)
     a.reset(y, 0.0, ref(0.0))
     ctrl, e = a, []

@@ -290,5 +290,8 @@ def hand_over(new: Any, old: Any | None, y: float, r: float | None = None) -> An
     else:
         u0, r0, du = new.limits.v_safe, r, 0.0
     new.reset(y, u0, r0)
-    new._du = du  # the command's rate in force, for laws that fade a start-up bump (OpenLoop)
+    law = new
+    while getattr(law, "inner", law) is not law:  # through the wrappers (compensation, oscillation watch)
+        law = law.inner
+    law._du = du  # the command's rate in force, for laws that fade a start-up bump (OpenLoop); set on the law
     return new
