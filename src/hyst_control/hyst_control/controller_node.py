@@ -259,7 +259,7 @@ class ControllerNode(AtomicParametersNode):
 
     def _switch(self, s: ControllerSettings) -> None:
         new = self._build(s)
-        self._n_osc = 0
+        self._n_osc, self._oscillation = 0, ""  # a fresh law: the old one's derating no longer stands
         self._ctrl = hand_over(new, self._ctrl, self._y) if math.isfinite(self._y) else None
         self._n["switches"] += 1
         self._skip = int(0.25 * s.rate)
@@ -314,7 +314,7 @@ class ControllerNode(AtomicParametersNode):
         if self._ctrl is None or self._tripped:
             u0 = _F(msg.effort[0]) if msg.effort and math.isfinite(msg.effort[0]) else s.limits.v_safe
             c = self._build(s)
-            self._n_osc = 0
+            self._n_osc, self._oscillation = 0, ""
             c.reset(y, u0, y if self._ref is None and s.reference is None else self._target(t, y))
             self._ctrl = c
             self._skip = int(0.25 * s.rate)

@@ -191,8 +191,9 @@ class Supervised:
         self.law.limits = value
 
     def set_gains(self, gains) -> None:
-        """New configured gains (a parameter change): the derating starts again from them."""
+        """New configured gains (a parameter change): they run as set, and a derating starts again from them."""
         self.configured = gains
+        self.level = 0
         if hasattr(self.law, "set_gains"):
             self.law.set_gains(gains)
 
