@@ -197,11 +197,10 @@ def run(args: argparse.Namespace) -> int:
     if stab is not None and stab.running is not None:
         out.update(stability=stab.message, spectral_radius=stab.running.spectral_radius,
                    derated={n: b for n, _, b in stab.derated})
-    blind = comp.sensor_only if comp is not None and args.algorithm == "open_loop" else []
     out.update(reference=args.reference, mismatch=args.mismatch, units="m, V", params=args.params,
-               scenario=args.scenario, compensated=[n for n in comp.names if n not in blind] if comp else [],
-               not_compensated={**comp.unused, **{n: "needs the sensor" for n in blind}} if comp else {})
-    if comp is not None and (comp.unused or blind) and not args.json:
+               scenario=args.scenario, compensated=comp.compensated(args.algorithm) if comp else [],
+               not_compensated=comp.not_compensated(args.algorithm) if comp else {})
+    if comp is not None and comp.not_compensated(args.algorithm) and not args.json:
         print(f"note: {comp.describe(args.algorithm)}", file=sys.stderr)
     if args.json:
         json.dump(out, sys.stdout)

@@ -112,17 +112,26 @@ class Compensation:
         """Effects estimated from the sensor (drift): the feedback laws use them, the open-loop inverse cannot."""
         return [e.name for e in self.used if e.needs_sensor]
 
+    def compensated(self, algorithm: str | None = None) -> list[str]:
+        """The effects ``algorithm`` compensates (open loop: not the sensor-only ones), in the file's order."""
+        blind = self.sensor_only if algorithm == "open_loop" else []
+        return [n for n in self.names if n not in blind]
+
+    def not_compensated(self, algorithm: str | None = None) -> dict[str, str]:
+        """Effect → why ``algorithm`` does not compensate it."""
+        blind = self.sensor_only if algorithm == "open_loop" else []
+        return {**self.unused, **{n: "estimated from the sensor, which the open-loop inverse does not read"
+                                  for n in blind}}
+
     def describe(self, algorithm: str | None = None) -> str:
         """One sentence for logs and /diagnostics ('' when there is nothing to say); ``algorithm`` "open_loop"
         lists the sensor-only effects as not compensated."""
         parts = []
-        blind = self.sensor_only if algorithm == "open_loop" else []
-        names = [n for n in self.names if n not in blind]
+        names = self.compensated(algorithm)
         if names:
             parts.append("compensating " + ", ".join(names)
                          + (f" (reference previewed {self.preview * 1e3:.3g} ms)" if self.preview > 0 else ""))
-        unused = {**self.unused, **{n: "estimated from the sensor, which the open-loop inverse does not read"
-                                    for n in blind}}
+        unused = self.not_compensated(algorithm)
         if unused:
             parts.append("not compensated: " + "; ".join(f"{k}: {v}" for k, v in unused.items()))
         return "; ".join(parts)

@@ -368,23 +368,24 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
         for r_s, nm, vals in top:
             if not np.isfinite(r_s):
                 continue
+            options = []  # (model, θ, residual)
             try:
                 mm, tth, yh = guarded_refit(s.base_model, chosen + [nm], s.cfg, t, u, y, val,
                                             {**prev_m.unpack(prev_th), **vals},
                                             theta_base=prev_c.split(prev_th)[0],
                                             carry=_effect_values(prev_m, prev_th), fitter=s.fit, prior=vals)
+                options.append((mm, tth, y - yh))
             except (EffectError, FitError):
-                if nm not in screened:
-                    continue
-                mm, tth, yh = screened[nm][0], screened[nm][1], y - screened[nm][2]
+                pass
             # A screen that refitted jointly from the base (delay, asymmetry) may have found a better basin than
             # the refit carrying this rung's values: never go back from a model already found (a creep rung with
             # an overdamped 21 Hz "mode" refitted to 39.7 nm, while the screen from the base had reached 2.15 nm).
             if nm in screened:
-                m_s, th_s, e_s = screened[nm]
-                if rmse(e_s[val]) < rmse((y - yh)[val]):
-                    mm, tth, yh = m_s, th_s, y - e_s
-            trial.append((rmse((y - yh)[val]), nm, mm, tth, y - yh))
+                options.append(screened[nm])
+            if not options:
+                continue
+            mm, tth, e = min(options, key=lambda o: rmse(o[2][val]))  # the refit on a tie
+            trial.append((rmse(e[val]), nm, mm, tth, e))
             s.say(f"refit {mm.name}: validation RMSE {fmt_len(trial[-1][0])}")
         if not trial:
             break
