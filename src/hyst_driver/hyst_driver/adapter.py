@@ -232,8 +232,16 @@ class AsciiAdapter(Adapter):
 class GcsAdapter(Adapter):
     """GCS-like (:mod:`hyst_driver.protocol_gcs`): polled ``POS?``/``VOL?`` pairs, no checksums.
 
-    Replies are paired with queries in order; any bad line drops the pending queries (the rest of that
-    exchange is discarded as ``unexpected``) so a lost line cannot shift later pairs. Positions are in µm.
+    GCS replies do not say which query they answer, so they are paired by counting: queries always go out in
+    ``POS?``/``VOL?`` pairs and, while *synchronised*, the adapter knows exactly how many value lines it is owed,
+    so the parity of that count says which one the next line answers. Anything that breaks the count — a line
+    that does not decode (garbage spliced into a reply), a value line nobody asked for, a new poll while the
+    last exchange still owes lines (a late device, a lost line) — desynchronises the adapter: value lines are
+    then discarded (``unexpected``) until the reply to a ``*IDN?`` *marker*, which no value reply can look like;
+    every poll sent while desynchronised carries one. Without it a late ``VOL?`` reply taken for the next
+    ``POS?`` shifted every later pair by one line, and a position (µm) read as the applied voltage twice in a
+    row re-seeded the slew limiter: a 69.6 V step reached the device (CI, garbage on the link).
+    ``ERR?`` replies (bare integers) are taken out of band, in any state. Positions are in µm.
     """
 
     name = "gcs"
@@ -241,15 +249,24 @@ class GcsAdapter(Adapter):
     quantum = 10.0 ** -gcs.VOLT_DECIMALS
     #: Metres per GCS position unit (µm).
     POSITION_UNIT_M = 1e-6
+    #: Markers remembered while their replies are outstanding (more means some were lost; the oldest go).
+    MAX_MARKERS = 8
 
     def __init__(self, v_plausible: tuple[float, float] = (-1000.0, 1000.0)) -> None:
         super().__init__(v_plausible)
         self._framer = hdb.LineFramer(gcs.MAX_LINE)
-        self._pending: deque[str] = deque()
+        self._markers: deque[int] = deque(maxlen=self.MAX_MARKERS)  # POS?/VOL? pairs sent after each marker
+        self._synced = False
+        self._owed = 0  # value lines still owed while synchronised (even: the next one answers POS?)
         self._pos: float | None = None
 
+    @property
+    def synchronised(self) -> bool:
+        """True while replies can be paired with queries (see the class docstring)."""
+        return self._synced
+
     def identify(self) -> bytes:
-        self._pending.append("*IDN?")
+        self._marker()
         return gcs.encode_idn()
 
     def start(self, rate_hz: int) -> bytes:
@@ -263,78 +280,103 @@ class GcsAdapter(Adapter):
 
     @property
     def busy(self) -> bool:
-        """True while replies to the last queries are still outstanding."""
-        return bool(self._pending)
+        """True while replies to the last queries are still outstanding (or a marker's reply is awaited)."""
+        return self._owed > 0 or not self._synced
+
+    def _marker(self) -> None:
+        self._synced, self._owed, self._pos = False, 0, None
+        self._markers.append(0)
+
+    def _pair(self) -> bytes:
+        """One POS?/VOL? pair, counted where its replies will be paired; a marker first if nothing can be."""
+        marker = b""
+        if not self._synced and not self._markers:
+            self._marker()
+            marker = gcs.encode_idn()
+        if self._synced:
+            self._owed += 2
+        else:
+            self._markers[-1] += 1
+        return marker + gcs.encode_pos_query() + gcs.encode_vol_query()
 
     def poll(self) -> bytes:
-        # A new exchange: whatever the last one still owes is late; late lines are 'unexpected', not mispaired.
-        self._pending.clear()
-        self._pos = None
-        self._pending.extend(("POS?", "VOL?"))
-        return gcs.encode_pos_query() + gcs.encode_vol_query()
+        if self._synced and self._owed == 0:
+            return self._pair()
+        # The last exchange still owes lines (late, or lost): whether they will come is unknown, so resynchronise.
+        self._marker()
+        return gcs.encode_idn() + self._pair()
 
     def read_once(self) -> bytes:
-        self._pending.extend(("POS?", "VOL?"))  # queued behind a pending *IDN? (handshake), not replacing it
-        return gcs.encode_pos_query() + gcs.encode_vol_query()
+        return self._pair()  # queued behind a pending *IDN? (handshake), not replacing it
 
     def error_query(self) -> bytes:
-        self._pending.append("ERR?")
-        return gcs.encode_err_query()
+        return gcs.encode_err_query()  # answered by a bare integer, taken out of band
 
     def reset(self) -> None:
         self._framer.reset()
-        self._pending.clear()
-        self._pos = None
+        self._markers.clear()
+        self._synced, self._owed, self._pos = False, 0, None
+
+    def _desync(self) -> None:
+        self._synced, self._owed, self._pos = False, 0, None
 
     def feed(self, data: bytes) -> list[Event]:
         n_over = self._framer.overlong
         lines = self._framer.feed(data)
         events: list[Event] = [BadFrame("overlong", "line too long")] * (self._framer.overlong - n_over)
         if self._framer.overlong > n_over:
-            self._pending.clear()
+            self._desync()
         for line in lines:
-            if not line.strip():
-                continue
-            if line.strip().lstrip(b"-").isdigit():
-                # A bare integer can only answer ERR?: take it even out of order (late after a busy spell),
-                # because the device cleared its latched error when it answered — dropping it would lose it.
-                if "ERR?" in self._pending:
-                    self._pending.remove("ERR?")
-                code = int(line)
-                if code != 0:
-                    events.append(DeviceFault(code, gcs.ERROR_CODES.get(code, "error"), severe=code >= 1000))
-                continue
-            if not self._pending:
-                events.append(BadFrame("unexpected", f"reply {line[:30]!r} to no query"))
-                continue
-            expect = self._pending.popleft()
+            if line.strip():
+                self._line(line, events)
+        return events
+
+    def _line(self, line: bytes, events: list[Event]) -> None:
+        text = line.strip()
+        if text.lstrip(b"-").isdigit():
+            # A bare integer can only answer ERR?: taken in any order (late after a busy spell), because the
+            # device cleared its latched error when it answered — dropping it would lose it.
+            code = int(text)
+            if code != 0:
+                events.append(DeviceFault(code, gcs.ERROR_CODES.get(code, "error"), severe=code >= 1000))
+            return
+        if b"=" not in line:  # the only reply without '=': *IDN?, the marker
             try:
-                msg = gcs.decode_reply(line, expect)
+                idn = cast(gcs.IdnReply, gcs.decode_reply(line, "*IDN?"))
             except ProtocolError as err:
                 events.append(BadFrame("syntax", str(err)))
-                self._pending.clear()
-                self._pos = None
-                continue
-            # decode_reply's reply type follows from the query: AxisValue (POS?/VOL?), ErrorCode, IdnReply
-            if expect == "POS?":
-                self._pos = cast(gcs.AxisValue, msg).value * self.POSITION_UNIT_M
-            elif expect == "VOL?":
-                volts = cast(gcs.AxisValue, msg).value
-                if self._pos is None:
-                    events.append(BadFrame("unexpected", "VOL? reply without POS?"))
-                elif not self._plausible(volts):
-                    events.append(BadFrame("implausible", f"applied voltage {volts} V"))
-                else:
-                    events.append(Reading(self._pos, volts, None))
-                self._pos = None
-            elif expect == "ERR?":
-                err_code = cast(gcs.ErrorCode, msg).code
-                if err_code != 0:
-                    events.append(DeviceFault(err_code, gcs.ERROR_CODES.get(err_code, "error"),
-                                              severe=err_code >= 1000))
-            else:
-                events.append(Identified(cast(gcs.IdnReply, msg).text))
-        return events
+                self._desync()
+                return
+            if not self._markers:  # nobody asked: the count cannot be trusted either
+                events.append(BadFrame("unexpected", f"identity {idn.text[:30]!r} to no query"))
+                self._desync()
+                return
+            events.append(Identified(idn.text))
+            self._synced, self._owed, self._pos = True, 2 * self._markers.popleft(), None
+            return
+        if not self._synced or self._owed == 0:
+            events.append(BadFrame("unexpected", f"reply {line[:30]!r} to no query" if self._synced
+                                   else f"reply {line[:30]!r} discarded until resynchronised"))
+            self._desync()
+            return
+        expect = "POS?" if self._owed % 2 == 0 else "VOL?"
+        try:
+            value = cast(gcs.AxisValue, gcs.decode_reply(line, expect)).value
+        except ProtocolError as err:
+            events.append(BadFrame("syntax", str(err)))
+            self._desync()
+            return
+        self._owed -= 1
+        if expect == "POS?":
+            self._pos = value * self.POSITION_UNIT_M
+            return
+        pos, self._pos = self._pos, None
+        if pos is None:  # cannot happen while the count holds; kept so that a defect shows as a bad frame
+            events.append(BadFrame("unexpected", "VOL? reply without POS?"))
+        elif not self._plausible(value):
+            events.append(BadFrame("implausible", f"applied voltage {value} V"))
+        else:
+            events.append(Reading(pos, value, None))
 
 
 #: The protocols by name (a registry as data: :func:`make_adapter` and the ``protocol`` parameter read it). Adding

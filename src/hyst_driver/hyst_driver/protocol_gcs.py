@@ -21,8 +21,10 @@ host sends          meaning                              device replies
 ==================  ==================================  ===============================
 
 Error codes (GCS numbering where one exists): see :data:`ERROR_CODES`.
-Without checksums a corrupted digit is undetectable; the driver therefore never derives anything
-safety-relevant from a reply (the limiter runs on what it sent) and rejects implausible read-backs.
+Without checksums a corrupted digit is undetectable; the driver's limiter therefore runs on what it sent, believes
+a read-back that contradicts it only when read twice in a row, and rejects implausible read-backs. Replies carry no
+query id: the adapter pairs them by counting and resynchronises on the reply to ``*IDN?`` (the only reply without
+``=``) whenever the count breaks (:class:`hyst_driver.adapter.GcsAdapter`).
 """
 from __future__ import annotations
 

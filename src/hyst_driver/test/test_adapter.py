@@ -54,19 +54,64 @@ def test_gcs_pairs_replies_in_query_order():
     assert ev[1] == DeviceFault(1000, "amplifier fault (overload or over-temperature)", True)
 
 
-def test_gcs_bad_line_drops_the_exchange_instead_of_mispairing():
+def _synced_gcs() -> GcsAdapter:
     ad = GcsAdapter(v_plausible=(-15.0, 165.0))
-    ad.poll()
+    assert ad.identify() == b"*IDN?\n"
+    assert ad.feed(b"hyst,GCS-EMU,1,1\n") == [Identified("hyst,GCS-EMU,1,1")] and ad.synchronised
+    return ad
+
+
+def _kinds(events) -> list[str]:
+    return [e.kind if isinstance(e, BadFrame) else type(e).__name__ for e in events]
+
+
+def test_gcs_bad_line_resynchronises_instead_of_mispairing():
+    ad = _synced_gcs()
+    assert ad.poll() == b"POS? 1\nVOL? 1\n"
     ev = ad.feed(b"1=12.31=75.0\n1=75.0\n")  # spliced partial POS? reply, then VOL? reply
-    assert [e.kind for e in ev] == ["syntax", "unexpected"]
-    ad.poll()
-    assert ad.feed(b"1=10.0\n1=500.0\n") == [BadFrame("implausible", "applied voltage 500.0 V")]
-    ad.poll()  # a late reply of an abandoned exchange is never paired with the new one
-    assert len(ad.feed(b"1=10.0\n1=20.0\n")) == 1
+    assert _kinds(ev) == ["syntax", "unexpected"] and not ad.synchronised and ad.busy
+    assert ad.poll() == b"*IDN?\nPOS? 1\nVOL? 1\n"  # desynchronised: the next poll carries a marker
+    # lines before the marker's reply are discarded, those after it paired
+    ev = ad.feed(b"1=75.0\nhyst,GCS-EMU,1,1\n1=10.0\n1=500.0\n")
+    assert _kinds(ev) == ["unexpected", "Identified", "implausible"] and ad.synchronised and not ad.busy
     ad.error_query()
-    ad.poll()  # ERR? abandoned by a new exchange: its late answer is still reported, not dropped
+    ad.poll()  # ERR? overtaken by a new exchange: its late answer is still reported, not dropped
     assert ad.feed(b"17\n1=1.0\n1=2.0\n") == [DeviceFault(17, "parameter out of range", False),
                                                 Reading(pytest.approx(1e-6), 2.0, None)]
+
+
+def test_gcs_late_reply_never_shifts_the_pairs():
+    """The CI failure: a VOL? reply arriving after the next poll was taken for that poll's POS?, every later pair
+    was shifted by one line, and the position (µm) read as the applied voltage (V) re-seeded the limiter."""
+    ad = _synced_gcs()
+    ad.poll()
+    assert ad.feed(b"1=23.8440\n") == []  # POS? answered, VOL? late ...
+    assert ad.busy
+    assert ad.poll() == b"*IDN?\nPOS? 1\nVOL? 1\n"  # ... when the sample timeout polls again
+    ev = ad.feed(b"1=119.218384\n")  # the late VOL? reply: discarded, not taken for the new POS?
+    ev += ad.feed(b"hyst,GCS-EMU,1,1\n1=23.8440\n1=119.218384\n")
+    for _ in range(2):
+        assert not ad.busy and ad.poll() == b"POS? 1\nVOL? 1\n"
+        ev += ad.feed(b"1=23.8440\n1=119.218384\n")
+    assert _kinds(ev) == ["unexpected", "Identified", "Reading", "Reading", "Reading"]
+    readings = [e for e in ev if isinstance(e, Reading)]
+    assert len(readings) == 3 and all(r.applied_v == 119.218384 for r in readings)
+    assert all(r.position_m == pytest.approx(23.844e-6) for r in readings)
+
+
+def test_gcs_counts_pairs_across_markers_and_lost_marker_replies():
+    ad = GcsAdapter()
+    hs = ad.identify() + ad.read_once() + ad.read_once()  # the link's handshake: two read-backs after *IDN?
+    assert hs == b"*IDN?\nPOS? 1\nVOL? 1\nPOS? 1\nVOL? 1\n"
+    assert _kinds(ad.feed(b"1=9.0\n")) == ["unexpected"]  # from before the handshake: never paired
+    assert _kinds(ad.feed(b"x,y\n1=1.0\n1=2.0\n1=3.0\n1=4.0\n")) == ["Identified", "Reading", "Reading"]
+    assert ad.read_once() == b"POS? 1\nVOL? 1\n"  # synchronised: no marker
+    ad.poll(), ad.poll()  # two resynchronising polls in flight; the first marker's reply is lost to garbage
+    ev = ad.feed(b"1=5.0\n1=6.0\n\xff\xfe\n1=7.0\n1=8.0\nx,y\n1=9.0\n1=10.0\n")
+    assert _kinds(ev)[-2:] == ["Identified", "Reading"] and ev[-1] == Reading(pytest.approx(9e-6), 10.0, None)
+    assert not any(isinstance(e, Reading) for e in ev[:-2])
+    assert _kinds(ad.feed(b"x,y\n")) == ["Identified"]  # the second marker's own reply
+    assert _kinds(ad.feed(b"some,identity\n")) == ["unexpected"] and not ad.synchronised  # nobody asked
 
 
 def test_make_adapter():

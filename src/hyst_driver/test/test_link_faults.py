@@ -27,11 +27,8 @@ def _recovered(rig, after_samples: int) -> bool:
     return rig.run_until(lambda: h.state == "running" and h.samples >= after_samples + 3, DEADLINE)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("protocol", PROTOCOLS)
-@pytest.mark.parametrize("fault", ["garbage", "partial", "checksum", "error"])
-def test_frame_faults_100_runs(make_rig, check_received, check_applied, test_limits, protocol, fault):
-    rig = make_rig(protocol, seed=sum(map(ord, protocol + fault)), link_timeout=0.5)  # loaded CI: no spurious drops
+def _frame_faults(rig, fault: str) -> int:
+    """Inject ``fault`` RUNS times, each read past and recovered from; return how many the health counters saw."""
     assert rig.run_until(lambda: rig.link.health.state == "running", DEADLINE), rig.link.health
     h = rig.link.health
     noticed = 0
@@ -49,6 +46,19 @@ def test_frame_faults_100_runs(make_rig, check_received, check_applied, test_lim
     # A frame fault must not cost the connection; a loaded host stalling this process for longer than
     # link_timeout may, rarely — a driver that reconnects on bad frames would show ~RUNS here.
     assert h.disconnects <= 0.1 * RUNS, f"{fault} costs the connection: {rig.link.snapshot()}"
+    # Every read-back is a voltage the driver wrote. A reply paired with the wrong query (GCS has no ids: a
+    # position in µm taken for the applied voltage) shows here first, and read twice in a row it re-seeds the
+    # limiter: a 69.6 V step reached the device in CI. Uncounted pairing: 0-34 per 100 garbage faults by seed.
+    assert rig.link.limiter.counts.unexplained <= 1, rig.link.limiter.counts
+    return noticed
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("fault", ["garbage", "partial", "checksum", "error"])
+def test_frame_faults_100_runs(make_rig, check_received, check_applied, test_limits, protocol, fault):
+    rig = make_rig(protocol, seed=sum(map(ord, protocol + fault)), link_timeout=0.5)  # loaded CI: no spurious drops
+    noticed = _frame_faults(rig, fault)
     if protocol == "ascii" and fault != "garbage":
         # HDB/1 catches every corrupted or truncated frame (CRC-8, sequence numbers).
         assert noticed == RUNS, noticed
@@ -56,6 +66,17 @@ def test_frame_faults_100_runs(make_rig, check_received, check_applied, test_lim
         # Noise made only of whitespace/line ends is harmless and ignored by design; without a checksum (GCS)
         # a corrupted digit can pass as a number, so only the checksum fault may go unnoticed there.
         assert noticed >= 0.9 * RUNS, noticed
+    check_received(rig.device.received, test_limits)
+    check_applied(rig.device, test_limits)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(4))
+def test_gcs_garbage_never_shifts_the_reply_pairs(make_rig, check_received, check_applied, test_limits, seed):
+    """Garbage spliced into GCS replies, on several seeds: where the old pairing went out of step (a late VOL?
+    reply taken for the next POS?) depends on the bytes and the timing, so one seed is not enough."""
+    rig = make_rig("gcs", seed=1000 + seed, link_timeout=0.5)
+    _frame_faults(rig, "garbage")
     check_received(rig.device.received, test_limits)
     check_applied(rig.device, test_limits)
 
