@@ -126,3 +126,25 @@ def test_bad_data_is_a_fit_error():
         fit(BASE_MODELS["mbw"]({}), t, np.zeros_like(u), np.nan_to_num(y))
     with pytest.raises(FitError, match="unknown method"):
         fit(BASE_MODELS["mbw"]({}), t, u, y, method="magic")
+
+
+def test_a_repeated_base_fit_is_reused_with_the_same_result_and_a_changed_one_is_not():
+    """A diagnosis refits the base MBW on the same (delayed) record many times: the fit is a pure function of its
+    inputs, so a repeat returns the very numbers a new fit gives; any change in the record or the model refits."""
+    t, u, y = _record(3000, seed=5)
+    cfg = {"u_scale": TRUE.u_scale, "y_scale": TRUE.y_scale, "offset_bound": 1e-4}
+    memo = FastFit.SOLVES
+    first = FastFit(BASE_MODELS["mbw"](cfg)).fit(t, u, y).result_
+    hits = memo.hits
+    again = FastFit(BASE_MODELS["mbw"](cfg)).fit(t, u, y).result_
+    assert memo.hits == hits + 1
+    assert np.array_equal(again.theta, first.theta) and again.rmse == first.rmse
+    assert again.n_iterations == first.n_iterations and again.n_evaluations == first.n_evaluations
+    u2 = u.copy()
+    u2[1000] += 1e-3  # one sample of the record
+    FastFit(BASE_MODELS["mbw"](cfg)).fit(t, u2, y)
+    FastFit(BASE_MODELS["mbw"]({**cfg, "y_scale": 2 * TRUE.y_scale})).fit(t, u, y)  # the model's configuration
+    FastFit(BASE_MODELS["mbw"](cfg), max_nfev=30).fit(t, u, y)  # the fitter's budget
+    assert memo.hits == hits + 1
+    again.theta[0] = -1.0  # results handed out are copies: the remembered fit cannot be changed through them
+    assert FastFit(BASE_MODELS["mbw"](cfg)).fit(t, u, y).result_.theta[0] == first.theta[0]

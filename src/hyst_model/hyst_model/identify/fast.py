@@ -35,6 +35,7 @@ from ..errors import FitError
 from ..model import MBWModel, Model
 from .base import Estimator, TrainProblem
 from .lm import LMResult, bounded_lm
+from .memo import FitMemo, content_key
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from ..effects.base import Effect
@@ -300,7 +301,33 @@ class FastFit(Estimator):
         pair = [th_data, th_default] if c_data < c_def else [th_default, th_data]
         return pair if not np.allclose(th_data, th_default) else pair[:1]
 
+    #: Base-alone fits by content (a diagnosis repeats the same one before every composed refit).
+    BASE_FITS = FitMemo(16)
+
+    #: Whole fits of a plain MBW/BW from its own starts (diagnose refits the base on the same delayed input).
+    SOLVES = FitMemo(16)
+
+    def _memo_key(self, problem: TrainProblem, base: MBWModel) -> bytes:
+        """Everything a base fit depends on (an MBWModel's configuration is plain values: its repr is its content)."""
+        return content_key(type(base).__qualname__, sorted(vars(base).items()), problem.t, problem.u, problem.y,
+                           problem.y_full, problem.a, problem.keep, problem.scale, problem.lower, problem.upper,
+                           self.max_nfev, self.n_starts)
+
     def _fit_base(self, bp: TrainProblem, base: MBWModel) -> tuple[np.ndarray, float] | None:
+        key = self._memo_key(bp, base)
+        hit = self.BASE_FITS.get(key)
+        if hit is not None:
+            x, c, n_eval = hit
+            bp.n_eval += n_eval
+            self._say(f"fast: base {base.name} alone: the same fit as before on this record (reused)")
+            return x, c
+        n0 = bp.n_eval
+        best = self._fit_base_now(bp, base)
+        if best is not None:
+            self.BASE_FITS.put(key, (best[0], best[1], bp.n_eval - n0))
+        return best
+
+    def _fit_base_now(self, bp: TrainProblem, base: MBWModel) -> tuple[np.ndarray, float] | None:
         best = None
         for th in self._base_starts(bp, base):
             sol = self._run(bp, bp.clip(th), max(self.max_nfev // 3, 10))
@@ -338,6 +365,22 @@ class FastFit(Estimator):
                           fun_cost=problem.sum_squares)
 
     def _solve(self, problem: TrainProblem):
+        model = self.model
+        if self.theta0 is not None or type(model) is not MBWModel:
+            return self._solve_now(problem)
+        key = self._memo_key(problem, model)
+        hit = self.SOLVES.get(key)
+        if hit is not None:
+            x, iters, history, msg, n_eval = hit
+            problem.n_eval += n_eval
+            self._say(f"fast: the same fit as before on this record (reused): training RMSE {history[-1]:.4g} m")
+            return x, iters, list(history), msg
+        n0 = problem.n_eval
+        x, iters, history, msg = self._solve_now(problem)
+        self.SOLVES.put(key, (x, iters, tuple(history), msg, problem.n_eval - n0))
+        return x, iters, history, msg
+
+    def _solve_now(self, problem: TrainProblem):
         starts = self._starts(problem)
         best: tuple[LMResult, float] | None = None
         history: list[float] = []
