@@ -40,8 +40,8 @@ from .base import check_model, hand_over
 from .compensation import effect_parameters
 from .dmrac import TABLE53
 from .errors import ControlError
-from .controllers import ALGORITHMS, make_controller
-from .supervisor import Supervised, output_span
+from .controllers import ALGORITHMS, make_controller, make_supervised
+from .supervisor import Supervised
 from .reference import parse_reference
 from .controller_settings import GAINS, MODEL_KEYS, ControllerSettings, cached_guard, profile_model
 from .stability import POLICIES, StabilityVerdict, identified_resonance
@@ -244,9 +244,8 @@ class ControllerNode(AtomicParametersNode):
                                    cur.compensation())
 
         act = str(self.get_parameter("stability.policy").value) != "warn"
-        v_range = (s.limits.v_min, s.limits.v_max)
-        return Supervised(make(s.algorithm, s.gains(s.algorithm)), s.algorithm, s.gains(s.algorithm), make,
-                          1.0 / s.rate, v_range, act, output_span(s.model, v_range))
+        return make_supervised(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial,
+                               s.compensation(), act, rebuild=make)
 
     def _report_oscillation(self) -> None:
         """Log and keep for /diagnostics what the oscillation watch did since the last sample."""

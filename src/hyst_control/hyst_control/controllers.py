@@ -8,7 +8,9 @@ module (the law with ``create``, its gains dataclass) plus one line in :data:`CO
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from hyst_common.limits import CommandLimits
 from hyst_common.params import Spec, table
@@ -92,9 +94,12 @@ def make_controller(algorithm: str, model: MBWParams, dt: float, limits: Command
 
 
 def make_supervised(algorithm: str, model: MBWParams, dt: float, limits: CommandLimits | None = None,
-                    gains=None, initial="model", compensation: Compensation | None = None, act: bool = True):
+                    gains=None, initial="model", compensation: Compensation | None = None, act: bool = True,
+                    rebuild: Callable[[str, Any], Any] | None = None):
     """:func:`make_controller` wrapped in a :class:`~hyst_control.supervisor.Supervised` oscillation watch that
-    rebuilds it with derated gains (same model, limits, compensation) when the command rings."""
+    rebuilds it with derated gains when the command rings: by default with the same model, limits and
+    compensation; ``rebuild(algorithm, gains)`` instead builds from what is in force at that time (the node:
+    a model pushed since)."""
     from .supervisor import Supervised, output_span
 
     lim = limits or PEA_LIMITS
@@ -102,10 +107,10 @@ def make_supervised(algorithm: str, model: MBWParams, dt: float, limits: Command
     if gains is None and CONTROLLERS[algorithm].gains is not None:
         gains = law.gains
 
-    def rebuild(alg: str, g):
+    def same(alg: str, g):
         return make_controller(alg, model, dt, lim, g, initial, compensation)
 
-    return Supervised(law, algorithm, gains, rebuild, dt, (lim.v_min, lim.v_max), act,
+    return Supervised(law, algorithm, gains, rebuild or same, dt, (lim.v_min, lim.v_max), act,
                       output_span(model, (lim.v_min, lim.v_max)))
 
 
