@@ -294,8 +294,8 @@ class DeviceLink:
             h.device_errors += 1
             h.severe_faults += int(ev.severe)
             h.last_device_error = f"{ev.code}: {ev.text}"
-        elif isinstance(ev, Identified):
-            h.identity = ev.text
+        elif isinstance(ev, Identified) and h.state == "handshake":
+            h.identity = ev.text  # later replies to *IDN? are GCS resynchronisation markers, not a new device
 
     def _write_voltage(self, now: float) -> None:
         v = self.limiter.step(now - self._last_write)

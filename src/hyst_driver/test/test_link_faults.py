@@ -77,6 +77,8 @@ def test_gcs_garbage_never_shifts_the_reply_pairs(make_rig, check_received, chec
     reply taken for the next POS?) depends on the bytes and the timing, so one seed is not enough."""
     rig = make_rig("gcs", seed=1000 + seed, link_timeout=0.5)
     _frame_faults(rig, "garbage")
+    # the markers' replies resynchronise; they do not rename the device (a garbled one would)
+    assert rig.link.health.identity.split(",")[1:2] == ["GCS-EMU"], rig.link.health.identity
     check_received(rig.device.received, test_limits)
     check_applied(rig.device, test_limits)
 
