@@ -280,8 +280,9 @@ class GcsAdapter(Adapter):
 
     @property
     def busy(self) -> bool:
-        """True while replies to the last queries are still outstanding (or a marker's reply is awaited)."""
-        return self._owed > 0 or not self._synced
+        """True while replies to the last queries are still outstanding (or a marker's reply is awaited). Not
+        after a desynchronisation with no marker sent: the next poll goes at once and carries one."""
+        return self._owed > 0 or (not self._synced and bool(self._markers))
 
     def _marker(self) -> None:
         self._synced, self._owed, self._pos = False, 0, None

@@ -69,8 +69,9 @@ def test_gcs_bad_line_resynchronises_instead_of_mispairing():
     ad = _synced_gcs()
     assert ad.poll() == b"POS? 1\nVOL? 1\n"
     ev = ad.feed(b"1=12.31=75.0\n1=75.0\n")  # spliced partial POS? reply, then VOL? reply
-    assert _kinds(ev) == ["syntax", "unexpected"] and not ad.synchronised and ad.busy
-    assert ad.poll() == b"*IDN?\nPOS? 1\nVOL? 1\n"  # desynchronised: the next poll carries a marker
+    # desynchronised: not busy (the next poll goes at once, not after a sample timeout) and it carries a marker
+    assert _kinds(ev) == ["syntax", "unexpected"] and not ad.synchronised and not ad.busy
+    assert ad.poll() == b"*IDN?\nPOS? 1\nVOL? 1\n" and ad.busy
     # lines before the marker's reply are discarded, those after it paired
     ev = ad.feed(b"1=75.0\nhyst,GCS-EMU,1,1\n1=10.0\n1=500.0\n")
     assert _kinds(ev) == ["unexpected", "Identified", "implausible"] and ad.synchronised and not ad.busy
