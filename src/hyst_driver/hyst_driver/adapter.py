@@ -258,6 +258,7 @@ class GcsAdapter(Adapter):
         self._markers: deque[int] = deque(maxlen=self.MAX_MARKERS)  # POS?/VOL? pairs sent after each marker
         self._synced = False
         self._owed = 0  # value lines still owed while synchronised (even: the next one answers POS?)
+        self._wait = False  # a marker is out and nothing since could have been its garbled reply
         self._pos: float | None = None
 
     @property
@@ -280,12 +281,14 @@ class GcsAdapter(Adapter):
 
     @property
     def busy(self) -> bool:
-        """True while replies to the last queries are still outstanding (or a marker's reply is awaited). Not
-        after a desynchronisation with no marker sent: the next poll goes at once and carries one."""
-        return self._owed > 0 or (not self._synced and bool(self._markers))
+        """True while replies to the last queries are still outstanding, or a marker's reply is awaited. Not
+        after a line that did not decode (it may have been that reply: a garbage burst's tail splices into the
+        next line, often the marker's reply, which cost a sample timeout per burst): the next poll goes at once
+        and carries another marker."""
+        return self._owed > 0 or self._wait
 
     def _marker(self) -> None:
-        self._synced, self._owed, self._pos = False, 0, None
+        self._synced, self._owed, self._pos, self._wait = False, 0, None, True
         self._markers.append(0)
 
     def _pair(self) -> bytes:
@@ -316,10 +319,10 @@ class GcsAdapter(Adapter):
     def reset(self) -> None:
         self._framer.reset()
         self._markers.clear()
-        self._synced, self._owed, self._pos = False, 0, None
+        self._synced, self._owed, self._pos, self._wait = False, 0, None, False
 
     def _desync(self) -> None:
-        self._synced, self._owed, self._pos = False, 0, None
+        self._synced, self._owed, self._pos, self._wait = False, 0, None, False
 
     def feed(self, data: bytes) -> list[Event]:
         n_over = self._framer.overlong
@@ -353,11 +356,13 @@ class GcsAdapter(Adapter):
                 self._desync()
                 return
             events.append(Identified(idn.text))
-            self._synced, self._owed, self._pos = True, 2 * self._markers.popleft(), None
+            self._synced, self._owed, self._pos, self._wait = True, 2 * self._markers.popleft(), None, False
             return
-        if not self._synced or self._owed == 0:
-            events.append(BadFrame("unexpected", f"reply {line[:30]!r} to no query" if self._synced
-                                   else f"reply {line[:30]!r} discarded until resynchronised"))
+        if not self._synced:  # late lines before the marker's reply: expected, the wait goes on
+            events.append(BadFrame("unexpected", f"reply {line[:30]!r} discarded until resynchronised"))
+            return
+        if self._owed == 0:
+            events.append(BadFrame("unexpected", f"reply {line[:30]!r} to no query"))
             self._desync()
             return
         expect = "POS?" if self._owed % 2 == 0 else "VOL?"

@@ -163,3 +163,18 @@ def test_reconnect_seed_ignores_samples_from_before_the_handshake():
     port.rx = hdb.encode_sample(hdb.Sample(3, 3000, 0, uv(65.0))) + hdb.encode_sample(hdb.Sample(4, 4000, 0, uv(65.0)))
     link.service(0.002)  # the RP replies: the stale setpoint (65 V) has been applied
     assert link.health.state == "running" and link.limiter.confirmed == 65.0
+
+
+def test_gcs_garbled_line_while_a_marker_is_out_does_not_wait_for_a_timeout():
+    """A garbage burst's tail splices into the next line, often the marker's own reply: the adapter must not sit
+    busy until the link's sample timeout (one timeout per burst, 90 per 100 bursts, before), but poll again at
+    once with another marker; late value lines before a marker's reply do not end the wait."""
+    ad = _synced_gcs()
+    ad.poll()
+    assert _kinds(ad.feed(b"\xca\xfe\n")) == ["syntax"] and not ad.busy
+    assert ad.poll() == b"*IDN?\nPOS? 1\nVOL? 1\n" and ad.busy
+    assert _kinds(ad.feed(b"1=20.65\n")) == ["unexpected"] and ad.busy  # a late line: still waiting
+    assert _kinds(ad.feed(b"O\xf66-hyst,GCS-EMU,1,1\n")) == ["syntax"] and not ad.busy  # the reply, garbled
+    assert ad.poll() == b"*IDN?\nPOS? 1\nVOL? 1\n"
+    ev = ad.feed(b"1=1.0\n1=2.0\nhyst,GCS-EMU,1,1\n1=3.0\n1=4.0\n")
+    assert _kinds(ev) == ["unexpected", "unexpected", "Identified", "Reading"] and ev[-1].applied_v == 4.0
