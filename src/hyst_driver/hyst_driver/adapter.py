@@ -288,7 +288,8 @@ class GcsAdapter(Adapter):
         return self._owed > 0 or self._wait
 
     def _marker(self) -> None:
-        self._synced, self._owed, self._pos, self._wait = False, 0, None, True
+        self._desync()
+        self._wait = True
         self._markers.append(0)
 
     def _pair(self) -> bytes:
@@ -319,7 +320,7 @@ class GcsAdapter(Adapter):
     def reset(self) -> None:
         self._framer.reset()
         self._markers.clear()
-        self._synced, self._owed, self._pos, self._wait = False, 0, None, False
+        self._desync()
 
     def _desync(self) -> None:
         self._synced, self._owed, self._pos, self._wait = False, 0, None, False

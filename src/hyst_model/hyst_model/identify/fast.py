@@ -306,9 +306,6 @@ class FastFit(Estimator):
     #: stopped in a slow valley at 745 nm, 5x worse than the Remark-4.1-constrained fit (test_admissible_fit).
     FTOL = 1e-8
 
-    #: Base-alone fits by content (a diagnosis repeats the same one before every composed refit).
-    BASE_FITS = FitMemo(16)
-
     #: Whole fits of a plain MBW/BW from its own starts (diagnose refits the base on the same delayed input).
     SOLVES = FitMemo(16)
 
@@ -319,20 +316,6 @@ class FastFit(Estimator):
                            self.max_nfev, self.n_starts)
 
     def _fit_base(self, bp: TrainProblem, base: MBWModel) -> tuple[np.ndarray, float] | None:
-        key = self._memo_key(bp, base)
-        hit = self.BASE_FITS.get(key)
-        if hit is not None:
-            x, c, n_eval = hit
-            bp.n_eval += n_eval
-            self._say(f"fast: base {base.name} alone: the same fit as before on this record (reused)")
-            return x, c
-        n0 = bp.n_eval
-        best = self._fit_base_now(bp, base)
-        if best is not None:
-            self.BASE_FITS.put(key, (best[0], best[1], bp.n_eval - n0))
-        return best
-
-    def _fit_base_now(self, bp: TrainProblem, base: MBWModel) -> tuple[np.ndarray, float] | None:
         best = None
         for th in self._base_starts(bp, base):
             sol = self._run(bp, bp.clip(th), max(self.max_nfev // 3, 10))

@@ -1,7 +1,8 @@
 """Results of deterministic base fits, remembered by the exact content of what they were fitted on.
 
-A diagnosis fits the base MBW alone on the same training record before every composed-model refit (the start of
-:class:`~hyst_model.identify.fast.FastFitter`): 13 identical multi-start fits, 7 of 31 s, on a 60k-sample record.
+A diagnosis fits the base MBW alone, from its multi-start grid, on the input as a delay transforms it before every
+rung and screen (:func:`hyst_model.diagnose.refit.refit`, through :class:`~hyst_model.identify.fast.FastFit`): 13
+such fits of 3 distinct inputs, 7 of 31 s, on a 60k-sample record.
 The fit is a pure function of the record, the windows, the model's configuration and the fitter's budget, so the
 key is a digest of exactly those; a hit returns the very numbers a new fit would (same result, same evaluation
 count reported), only sooner. Bounded (least recently used) and thread-safe.
