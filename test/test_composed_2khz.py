@@ -43,3 +43,22 @@ def test_composed_lockstep_2khz_tracks_at_the_noise_floor_and_switches():
 def test_bad_schedule_is_refused_with_a_reason():
     proc = subprocess.run([str(EXE), "--schedule", "dppc:x"], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "ALGORITHM:SECONDS" in proc.stderr
+
+
+def test_a_schedule_segment_waits_for_its_first_tracked_sample_within_a_bound():
+    """On a loaded machine start-up and the settling skip after a switch can eat a whole wall-clock segment (the
+    demo beside CI once tracked DPPC for 0 samples): a segment lasts its seconds and until its algorithm tracked a
+    sample, at most SEGMENT_STRETCH times its seconds."""
+    from hyst_bringup.composed import SEGMENT_STRETCH, _segment_done
+
+    class Ctl:
+        def __init__(self, n: int) -> None:
+            self.n = n
+
+        def tracking_summary(self) -> dict:
+            return {"dppc": {"samples": self.n}}
+
+    assert not _segment_done(Ctl(500), ("dppc", 2.0), 1.9)
+    assert _segment_done(Ctl(500), ("dppc", 2.0), 2.0)
+    assert not _segment_done(Ctl(0), ("dppc", 2.0), 2.0) and not _segment_done(Ctl(0), ("pid", 2.0), 5.9)
+    assert _segment_done(Ctl(0), ("dppc", 2.0), SEGMENT_STRETCH * 2.0)

@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"hyst demo: {', '.join(f'{a} {d:g} s' for a, d in schedule)} at {args.rate:g} Hz on a "
           f"{args.frequency:g} Hz sine; recording {bag}", flush=True)
     try:
-        out, err = loop.communicate(timeout=seconds + 30)
+        out, err = loop.communicate(timeout=3 * seconds + 30)  # a segment may stretch (composed.SEGMENT_STRETCH)
     except subprocess.TimeoutExpired:
         stop_processes([loop, rec])
         raise LoopError("the closed loop did not finish in time") from None
