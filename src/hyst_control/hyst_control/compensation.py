@@ -112,16 +112,19 @@ class Compensation:
         """Effects estimated from the sensor (drift): the feedback laws use them, the open-loop inverse cannot."""
         return [e.name for e in self.used if e.needs_sensor]
 
+    def _blind(self, algorithm: str | None) -> list[str]:
+        """Effects ``algorithm`` cannot use because it reads no sensor (the open-loop inverse)."""
+        return self.sensor_only if algorithm == "open_loop" else []
+
     def compensated(self, algorithm: str | None = None) -> list[str]:
         """The effects ``algorithm`` compensates (open loop: not the sensor-only ones), in the file's order."""
-        blind = self.sensor_only if algorithm == "open_loop" else []
+        blind = self._blind(algorithm)
         return [n for n in self.names if n not in blind]
 
     def not_compensated(self, algorithm: str | None = None) -> dict[str, str]:
         """Effect → why ``algorithm`` does not compensate it."""
-        blind = self.sensor_only if algorithm == "open_loop" else []
         return {**self.unused, **{n: "estimated from the sensor, which the open-loop inverse does not read"
-                                  for n in blind}}
+                                  for n in self._blind(algorithm)}}
 
     def describe(self, algorithm: str | None = None) -> str:
         """One sentence for logs and /diagnostics ('' when there is nothing to say); ``algorithm`` "open_loop"

@@ -237,15 +237,18 @@ class ControllerNode(AtomicParametersNode):
 
     def _build(self, s: ControllerSettings) -> Supervised:
         """The law of ``s``, watched for oscillation (:mod:`hyst_control.supervisor`): rebuilt derated if it
-        rings on a mode the model does not know (only reported under ``stability.policy: warn``)."""
+        rings on a mode the model does not know (only reported under ``stability.policy: warn``). Every caller
+        adopts it, so the old law's oscillation record is cleared here once it is built."""
         def make(alg: str, gains):  # at rebuild time: the settings then in force (a model push since, ...)
             cur = self._settings
             return make_controller(alg, cur.model, 1.0 / cur.rate, cur.limits, gains, cur.dmrac_initial,
                                    cur.compensation())
 
         act = str(self.get_parameter("stability.policy").value) != "warn"
-        return make_supervised(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial,
-                               s.compensation(), act, rebuild=make)
+        law = make_supervised(s.algorithm, s.model, 1.0 / s.rate, s.limits, s.gains(s.algorithm), s.dmrac_initial,
+                              s.compensation(), act, rebuild=make)
+        self._n_osc, self._oscillation = 0, ""  # a fresh law: the old one's derating no longer stands
+        return law
 
     def _report_oscillation(self) -> None:
         """Log and keep for /diagnostics what the oscillation watch did since the last sample."""
@@ -258,7 +261,6 @@ class ControllerNode(AtomicParametersNode):
 
     def _switch(self, s: ControllerSettings) -> None:
         new = self._build(s)
-        self._n_osc, self._oscillation = 0, ""  # a fresh law: the old one's derating no longer stands
         self._ctrl = hand_over(new, self._ctrl, self._y) if math.isfinite(self._y) else None
         self._n["switches"] += 1
         self._skip = int(0.25 * s.rate)
@@ -313,7 +315,6 @@ class ControllerNode(AtomicParametersNode):
         if self._ctrl is None or self._tripped:
             u0 = _F(msg.effort[0]) if msg.effort and math.isfinite(msg.effort[0]) else s.limits.v_safe
             c = self._build(s)
-            self._n_osc, self._oscillation = 0, ""
             c.reset(y, u0, y if self._ref is None and s.reference is None else self._target(t, y))
             self._ctrl = c
             self._skip = int(0.25 * s.rate)

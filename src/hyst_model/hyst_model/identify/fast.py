@@ -309,11 +309,12 @@ class FastFit(Estimator):
     #: Whole fits of a plain MBW/BW from its own starts (diagnose refits the base on the same delayed input).
     SOLVES = FitMemo(16)
 
-    def _memo_key(self, problem: TrainProblem, base: MBWModel) -> bytes:
-        """Everything a base fit depends on (an MBWModel's configuration is plain values: its repr is its content)."""
-        return content_key(type(base).__qualname__, sorted(vars(base).items()), problem.t, problem.u, problem.y,
+    def _memo_key(self, problem: TrainProblem, model: MBWModel) -> bytes:
+        """Everything a plain MBW/BW fit depends on (its configuration is plain values: its repr is its content),
+        the stopping rule included."""
+        return content_key(type(model).__qualname__, sorted(vars(model).items()), problem.t, problem.u, problem.y,
                            problem.y_full, problem.a, problem.keep, problem.scale, problem.lower, problem.upper,
-                           self.max_nfev, self.n_starts)
+                           self.max_nfev, self.n_starts, self.FTOL)
 
     def _fit_base(self, bp: TrainProblem, base: MBWModel) -> tuple[np.ndarray, float] | None:
         best = None
