@@ -134,7 +134,7 @@ class MBWModel(Model):
 
         Uses the forward sensitivities of :mod:`hyst_model.core.sensitivity` (about two simulations' cost).
         """
-        from .core.sensitivity import mbw_rest_state_sens, mbw_simulate_sens
+        from .core.sensitivity import mbw_rest_state_sens, mbw_simulate_jac
         p = self.to_params(theta)
         pv = p.vector
         un = np.ascontiguousarray(np.asarray(u, dtype=np.float64) / self.u_scale)
@@ -142,11 +142,7 @@ class MBWModel(Model):
             y0, S0 = mbw_rest_state_sens(pv, un[0])
         else:
             y0, S0 = 0.0, np.zeros(8)
-        ym, S = mbw_simulate_sens(pv, un, y0, S0)
-        J = np.empty((un.size, len(self._params)))
-        J[:, :-1] = self.y_scale * S[:, self._cols]
-        J[:, -1] = 1.0
-        return self.y_scale * ym + p.offset, J
+        return mbw_simulate_jac(pv, un, y0, S0, self._cols, self.y_scale, p.offset)
 
     def normal_equations(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray, a: int, y: np.ndarray,
                          scale: float) -> tuple[np.ndarray, np.ndarray, float]:

@@ -20,7 +20,7 @@ from numba import njit
 
 from .mbw import mbw_step
 
-__all__ = ["mbw_simulate_sens", "mbw_rest_state_sens", "mbw_normal_equations"]
+__all__ = ["mbw_simulate_sens", "mbw_simulate_jac", "mbw_rest_state_sens", "mbw_normal_equations"]
 
 
 @njit(cache=True)
@@ -91,6 +91,36 @@ def mbw_simulate_sens(p: np.ndarray, u: np.ndarray, y0: float, S0: np.ndarray):
         yp = yk
         up = u[k]
     return y, S
+
+
+@njit(cache=True)
+def mbw_simulate_jac(p: np.ndarray, u: np.ndarray, y0: float, S0: np.ndarray, cols: np.ndarray,
+                     y_scale: float, offset: float):
+    """:func:`mbw_simulate_sens` written straight into the model's Jacobian layout: ``(y_scale·y + offset, J)``
+    with ``J[:, i] = y_scale·S[:, cols[i]]`` and a last column of ones (the offset).
+
+    One pass and one (n, len(cols) + 1) array: gathering the columns afterwards in numpy cost four times the
+    recursion itself on 60k samples.
+    """
+    n = u.shape[0]
+    m = cols.shape[0]
+    y = np.empty(n)
+    J = np.empty((n, m + 1))
+    Sp = S0.copy()
+    Sk = np.empty(8)
+    yp = y0
+    up = u[0] if n else 0.0
+    for k in range(n):
+        yk = mbw_step(p, yp, u[k], up)
+        _sens_step(p, yp, u[k], up, Sp, Sk)
+        y[k] = y_scale * yk + offset
+        for i in range(m):
+            J[k, i] = y_scale * Sk[cols[i]]
+        J[k, m] = 1.0
+        Sp[:] = Sk
+        yp = yk
+        up = u[k]
+    return y, J
 
 
 @njit(cache=True)

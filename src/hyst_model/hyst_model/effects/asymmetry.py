@@ -53,6 +53,7 @@ class Asymmetry(Effect):
     physics = ("The loop is steeper or fatter at one end of the stroke than at the other; a symmetric hysteresis "
                "model cannot bend that way, a quadratic term can.")
     kind = "output"
+    pointwise = True
 
     def __init__(self, config=None):
         super().__init__(config)

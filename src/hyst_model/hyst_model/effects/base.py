@@ -29,6 +29,7 @@ Fixed configuration (``dt``, ``u_scale``, ``y_scale``, ...) reaches the effect t
 """
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -95,6 +96,9 @@ class Effect:
     #: A linear time-invariant operator on its inner signal (at rest at the start): it commutes with any other
     #: such effect, so the controllers may apply their inverses in another order (creep, a delay, a series mode).
     linear: bool = False
+    #: An output effect that acts sample by sample on its inner signal (y_k = g(x_k, u_k, t_k)): its derivative
+    #: is found once for the whole record when the fitters carry the base's sensitivities through it.
+    pointwise: bool = False
     #: Its per-sample form (:meth:`online`) predicts with the base model, so it is exact only directly on the base
     #: (a Smith predictor, the series resonance): the controllers move it inward past linear effects.
     on_base: bool = False
@@ -259,16 +263,45 @@ class ComposedModel(Model):
         return theta[: self._nbase], [theta[s] for s in self._slices]
 
     def simulate(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Output for packed ``theta``; inner stages whose parameters and inputs are unchanged since the last call
+        are reused (:class:`_StageMemo`), so a finite-difference step in an outer effect's parameter does not
+        simulate the base again."""
         tb, tes = self.split(theta)
         base = self.base
         order = sorted(range(len(self.effects)), key=lambda i: self.effects[i].kind != "base")
+        memo = self.__dict__.get("_memo")
+        if memo is None:
+            memo = self.__dict__["_memo"] = _StageMemo(len(order))
+
         def base_simulate(tt: np.ndarray, uu: np.ndarray) -> np.ndarray:
             return base.simulate(tb, tt, uu)
 
-        f: Callable[[np.ndarray, np.ndarray], np.ndarray] = base_simulate
-        for i in order:
+        f: Callable[[np.ndarray, np.ndarray], np.ndarray] = memo.wrap(0, tb.tobytes(), base_simulate)
+        key = tb.tobytes()
+        for j, i in enumerate(order):
             f = _bind(self.effects[i], tes[i], Inner(f, base, tb))
+            key += b"|" + tes[i].tobytes()
+            if j + 1 < len(order):  # the outermost stage is the result: the fitters cache that themselves
+                f = memo.wrap(j + 1, key, f)
         return f(np.asarray(t, dtype=np.float64), np.asarray(u, dtype=np.float64))
+
+    @property
+    def jac_available(self) -> bool:
+        """Whether :meth:`simulate_jac` carries the base's exact sensitivities (:mod:`.sensitivity`); the fitters
+        use finite differences of the whole model otherwise."""
+        from .sensitivity import jac_available
+        return jac_available(self)
+
+    def simulate_jac(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Output (m) and d y / d θ: the base's sensitivities through the effects (:mod:`.sensitivity`); only
+        when :attr:`jac_available`."""
+        from .sensitivity import composed_simulate_jac
+        return composed_simulate_jac(self, theta, t, u)
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state.pop("_memo", None)  # per process and thread; rebuilt on the first simulation
+        return state
 
     def legacy_values(self) -> dict[str, float]:
         """Namespaced :meth:`Effect.legacy_values` of every effect."""
@@ -293,6 +326,47 @@ class ComposedModel(Model):
                 if k in local and np.isfinite(v):
                     theta[s.start + local.index(k)] = v
         return np.clip(theta, lo, hi)
+
+
+class _StageMemo:
+    """The last output of each inner stage of a :class:`ComposedModel`, keyed by the parameters of that stage and
+    everything inside it, and by its input signals.
+
+    Every stage is a pure function of those, so a hit returns exactly what the simulation would (a copy: effects
+    may work in place on their inner output). Finite-difference Jacobians step one parameter at a time: for an
+    output effect's parameter every stage inside it is a hit (a screen on top of a fitted rung then no longer
+    re-simulates the rung for each of its parameters). One entry per stage and per thread.
+    """
+
+    def __init__(self, n_stages: int):
+        self._n = n_stages
+        self._local = threading.local()
+
+    def _slots(self) -> list:
+        slots = getattr(self._local, "slots", None)
+        if slots is None:
+            slots = self._local.slots = [None] * self._n
+        return slots
+
+    @staticmethod
+    def _same(a: np.ndarray, b: np.ndarray) -> bool:
+        return a is b or (a.shape == b.shape and bool(np.array_equal(a, b)))
+
+    def wrap(self, stage: int, key: bytes, f: Callable[[np.ndarray, np.ndarray], np.ndarray]
+             ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+        slots = self._slots()
+
+        def cached(tt: np.ndarray, uu: np.ndarray) -> np.ndarray:
+            tt = np.asarray(tt, dtype=np.float64)
+            uu = np.asarray(uu, dtype=np.float64)
+            hit = slots[stage]
+            if hit is not None and hit[0] == key and self._same(tt, hit[1]) and self._same(uu, hit[2]):
+                return hit[3].copy()
+            y = np.asarray(f(tt, uu), dtype=np.float64)
+            slots[stage] = (key, tt.copy(), uu.copy(), y.copy())
+            return y
+
+        return cached
 
 
 def _bind(effect: Effect, theta: np.ndarray, inner: Inner) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:

@@ -48,6 +48,29 @@ def _lag_bank(x: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(cache=True)
+def _lag_bank_cols(X: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """:func:`_lag_bank` of every column of ``X`` (n, k) in one pass (the columns vectorise)."""
+    n, k = X.shape
+    m = a.shape[0]
+    c = np.empty((m, k))
+    for i in range(m):
+        c[i, :] = X[0, :]
+    out = np.empty((n, k))
+    s = np.empty(k)
+    for r in range(n):
+        s[:] = 0.0
+        for i in range(m):
+            ai = a[i]
+            bi = 1.0 - ai
+            wi = w[i]
+            for j in range(k):
+                c[i, j] = ai * c[i, j] + bi * X[r, j]
+                s[j] += wi * c[i, j]
+        out[r, :] = s
+    return out
+
+
 def creep_lags(t: np.ndarray, x: np.ndarray, taus: np.ndarray = TAUS) -> np.ndarray:
     """States c_i (shape (len(taus), n)) of first-order lags driven by ``x``, at rest at ``x[0]``."""
     x = np.ascontiguousarray(x, dtype=np.float64)
@@ -86,6 +109,15 @@ class Creep(Effect):
         if gain == 0.0:
             return y
         return y - gain * creep_term(t, y, tilt)
+
+    def push(self, theta, t, u, x, y, J):
+        """Columns ``J`` of d x / d p carried through the (linear) operator in one pass: d y / d p."""
+        gain, tilt = float(theta[0]), float(theta[1])
+        if gain == 0.0:
+            return J
+        J = np.ascontiguousarray(J, dtype=np.float64)
+        a = np.exp(-sample_time(t) / TAUS)
+        return J - gain * (TAUS.size / PER_DECADE) * (J - _lag_bank_cols(J, a, _weights(tilt)))
 
     def online(self, theta, base=None):
         return CreepInverse(float(theta[0]), float(theta[1]), self.dt)

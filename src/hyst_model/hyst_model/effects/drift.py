@@ -51,6 +51,7 @@ class Drift(Effect):
     physics = ("The reading wanders slowly over the record even where the input repeats itself; the model's "
                "error at the same input level differs between early and late in the record.")
     kind = "output"
+    pointwise = True
     online_note = ("an input-independent offset: estimated from the sensor (a disturbance observer), which needs "
                    "a measurement; the open-loop inverse has none and cannot remove it")
 

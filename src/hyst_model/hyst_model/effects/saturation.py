@@ -51,6 +51,7 @@ class Saturation(Effect):
     physics = ("Near the end of the travel the measured displacement falls short of the model, more the larger "
                "the excursion: a flexure/preload stiffening, or an amplifier or sensor range limit.")
     kind = "output"
+    pointwise = True
 
     def __init__(self, config=None):
         super().__init__(config)

@@ -74,7 +74,7 @@ class TrainProblem:
         self._last_r: tuple[bytes, np.ndarray] | None = None
         lo, hi = model.bounds
         self.lower, self.upper = lo.astype(np.float64), hi.astype(np.float64)
-        self.has_jac = hasattr(model, "simulate_jac")
+        self.has_jac = hasattr(model, "simulate_jac") and bool(getattr(model, "jac_available", True))
         self.has_normal = hasattr(model, "normal_equations")
         self.inactive = frozenset(getattr(model, "inactive", ()))
 
@@ -134,13 +134,15 @@ class TrainProblem:
         """Residuals and a forward-difference Jacobian (p + 1 simulations), stepping inward at bounds.
 
         Parameters the model declares ``inactive`` (the output does not depend on them) get a zero column
-        without a simulation.
+        without a simulation. Columns go last parameter first: a composed model's outer effects come last and
+        its inner stages, unchanged by their steps, are reused from the simulation at ``theta``
+        (:class:`~hyst_model.effects.base.ComposedModel`) before the base parameters' steps replace them.
         """
         theta = np.asarray(theta, dtype=np.float64)
         r0 = self.residuals(theta)
         J = np.zeros((r0.size, theta.size))
         span = self.upper - self.lower
-        for i in range(theta.size):
+        for i in reversed(range(theta.size)):
             if i in self.inactive:
                 continue
             h = 1e-6 * max(abs(theta[i]), 1e-3 * span[i] if np.isfinite(span[i]) else 1e-3, 1e-12)
