@@ -1,11 +1,11 @@
-"""How diagnose chooses between candidates that validate alike (stages.prefer_simpler)."""
+"""How diagnose chooses between candidates that validate alike (ladder.prefer_simpler)."""
 from __future__ import annotations
 
 from types import SimpleNamespace
 
 import numpy as np
 
-from hyst_model.diagnose.stages import SIGNATURE_MARGIN, n_params, prefer_simpler
+from hyst_model.diagnose.ladder import SIGNATURE_MARGIN, n_params, prefer_simpler
 from hyst_model.spec import build_model
 
 CFG = {"dt": 5e-4, "u_scale": 15.0, "y_scale": 5e-6}

@@ -42,7 +42,8 @@ from ..errors import DataError, FitError
 from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scales, _simulate, candidate_names,
                     default_fitter, guarded_refit, refit, rmse, validation_mask)
 from .prune import prune
-from .stages import Candidate, Rung, Setup, climb, refit_all, screen_all, verdict
+from .ladder import climb
+from .stages import Candidate, Rung, Setup, refit_all, screen_all, verdict
 from .unexplained import UNEXPLAINED_FACTOR, Unexplained
 
 __all__ = ["Candidate", "Rung", "Diagnosis", "diagnose", "refit", "guarded_refit", "default_fitter",

@@ -1,4 +1,4 @@
-"""Backward elimination after the forward ladder of :func:`hyst_model.diagnose.stages.climb`.
+"""Backward elimination after the forward ladder of :func:`hyst_model.diagnose.ladder.climb`.
 
 The ladder adds effects greedily: the first effect is the one that explains most of the error on its own, the
 second the one that helps most on top of it. With two effects present, an effect taken early can stand in for

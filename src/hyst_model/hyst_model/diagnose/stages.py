@@ -1,4 +1,4 @@
-"""The stages of :func:`hyst_model.diagnose.diagnose.diagnose`: screen → refit → ladder → verdict.
+"""The stages of :func:`hyst_model.diagnose.diagnose.diagnose`: screen → refit → (ladder: :mod:`.ladder`) → verdict.
 
 Each stage reads the fitted base and the record from a :class:`Setup` and returns plain results; the
 orchestration (checks, the base fit, the :class:`~hyst_model.diagnose.diagnose.Diagnosis`) is in ``diagnose.py``.
@@ -21,7 +21,7 @@ from ..model import Model
 from .refit import Fixed, _Progress, _effect_values, _simulate, guarded_refit, paired_t, refit, rmse
 from .unexplained import Unexplained, explain_unexplained
 
-__all__ = ["Candidate", "Rung", "Setup", "screen_all", "refit_all", "rebase", "climb", "verdict", "prefer_simpler"]
+__all__ = ["Candidate", "Rung", "Setup", "screen_on", "screen_all", "refit_all", "rebase", "verdict"]
 
 
 @dataclass
@@ -301,158 +301,6 @@ def rebase(s: Setup, full: dict) -> bool:
         s.say(f"base {s.base} refitted from the base parameters of +{nm}: validation RMSE {fmt_len(best_val)}",
               step=False)
     return found is not None
-
-
-def n_params(s: Setup, nm: str) -> int:
-    """Free parameters effect ``nm`` adds (in its configuration on ``s.cfg``)."""
-    return len(compose(s.base_model, [nm], s.cfg).effects[-1].params())
-
-
-#: A residual signature at least this strong earns a candidate a joint refit at a rung even when its screen does not.
-STRONG_SIGNATURE = 0.5
-
-#: A residual signature this much stronger than the taken effect's is reported as disagreeing with the choice.
-SIGNATURE_MARGIN = 0.2
-
-
-def prefer_simpler(s: Setup, options: list[tuple[str, float, np.ndarray, float]]) -> tuple[int, str]:
-    """Index of the option to take from ``(effect, validation RMSE, residual, signature score)``, and why.
-
-    The best by validation RMSE, unless others are as good — the best does not cut their squared error
-    significantly (paired t below ``t_min``). Among those that validate alike the record cannot tell them
-    apart, so parsimony decides: the fewest free parameters (a parameter must earn its place, as it must against
-    the base — a 3-parameter mode imitates a sub-sample delay, and a slow one with 1 % participation imitates
-    creep, as well as the effect itself does), then the lower RMSE. The residual signatures only corroborate: when
-    the taken effect's is clearly weaker (by more than :data:`SIGNATURE_MARGIN`) than the best one's, the evidence
-    says they disagree. (Deciding by the signatures instead named a 0.3-sample sensor delay a 370 Hz, ζ 0.76
-    "mode" on generated records: a linear-interpolated delay has an acceleration-shaped residual too.)
-    """
-    best = min(range(len(options)), key=lambda i: options[i][1])
-    nm_b, r_b, e_b, sc_b = options[best]
-    alike = [(best, 0.0)]
-    for i, (nm, r, e, _) in enumerate(options):
-        if i != best:
-            t = paired_t(e[s.val], e_b[s.val])
-            if t < s.t_min:
-                alike.append((i, t))
-    if len(alike) == 1:
-        return best, ""
-    k, r, pick, t = min((n_params(s, options[i][0]), options[i][1], i, t) for i, t in alike)
-    if pick == best:
-        return best, ""
-    sc = options[pick][3]
-    why = (f"taken before {nm_b} ({fmt_len(r_b)} on validation, {n_params(s, nm_b)} parameters): they validate "
-           f"alike (paired t {t:.1f} < {s.t_min:g}) and it has fewer parameters ({k})")
-    if sc_b > sc + SIGNATURE_MARGIN:
-        why += (f"; the residual signatures disagree ({nm_b} {sc_b:.2f}, {options[pick][0]} {sc:.2f}): the record "
-                "cannot tell the two apart")
-    return pick, why
-
-
-def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
-          ) -> tuple[list, dict[str, tuple[Model, np.ndarray]], list]:
-    """Stage 3: the error ladder — the best significant effect, then, while the error is above the noise floor,
-    the best further effect screened on top of the current rung and refitted (``full_rate_top`` of them).
-
-    Returns ``(ladder, models, chosen)``: the rungs, (model, θ) by model name, the effects in order.
-    """
-    t, u, y, val, train = s.t, s.u, s.y, s.val, s.train
-    ladder = [Rung(s.base, [], s.base_val, rmse(s.e_base[train]))]
-    models: dict[str, tuple[Model, np.ndarray]] = {s.base: (s.base_model, s.th_base)}
-    chosen: list[str] = []
-    if not (ranked and ranked[0].significant):
-        return ladder, models, chosen
-    sig = [c for c in ranked if c.significant and c.effect in full]
-    pick, why = prefer_simpler(s, [(c.effect, c.rmse, full[c.effect][2], c.score) for c in sig])
-    best = sig[pick]
-    best.note = why
-    m, th, e = full[best.effect]
-    chosen.append(best.effect)
-    ladder.append(Rung(m.name, list(chosen), best.rmse, best.rmse_train))
-    models[m.name] = (m, th)
-    cur_e = e
-    while len(chosen) < s.max_rungs:
-        cur_val = rmse(cur_e[val])
-        if cur_val <= s.noise_margin * s.noise:
-            break
-        # A second effect is often masked by the first when tested alone: screen every remaining one on top of
-        # the current rung, then refit the best at full rate.
-        prev_m, prev_th = models[ladder[-1].model]
-        prev_c = cast(ComposedModel, prev_m)  # every rung above the base is a refitted composed model
-        trial_s = []
-        screened: dict = {}  # effect -> (model, θ, residual) of a screen that was itself a joint refit
-        for nm in s.names:
-            if nm in chosen:
-                continue
-            try:
-                compose(s.base_model, chosen + [nm], s.cfg)
-                r_s, vals, full_s = screen_on(s, prev_m, prev_th, chosen, nm, carry.get(nm))
-            except (EffectError, FitError):
-                continue
-            trial_s.append((r_s, nm, vals))
-            if full_s is not None:
-                screened[nm] = full_s
-            s.say(f"screen {prev_m.name}+{nm}: validation RMSE {fmt_len(r_s)}", step=False)
-        trial_s.sort(key=lambda x: x[0])
-        # The screen holds the rung fixed and can undersell an effect only a joint refit shows (creep on top of
-        # a delay: 63 nm screened, 2 nm refitted): the strongest residual signature beyond the top screened ones
-        # is refitted too, when it is strong.
-        top = trial_s[:s.full_rate_top]
-        strong = [x for x in trial_s[s.full_rate_top:] if cands[x[1]].score >= STRONG_SIGNATURE]
-        if strong:
-            top.append(max(strong, key=lambda x: cands[x[1]].score))
-        trial = []
-        for r_s, nm, vals in top:
-            if not np.isfinite(r_s):
-                continue
-            options = []  # (model, θ, residual)
-            try:
-                mm, tth, yh = guarded_refit(s.base_model, chosen + [nm], s.cfg, t, u, y, val,
-                                            {**prev_m.unpack(prev_th), **vals},
-                                            theta_base=prev_c.split(prev_th)[0],
-                                            carry=_effect_values(prev_m, prev_th), fitter=s.fit, prior=vals)
-                options.append((mm, tth, y - yh))
-            except (EffectError, FitError):
-                pass
-            # A screen that refitted jointly from the base (delay, asymmetry) may have found a better basin than
-            # the refit carrying this rung's values: never go back from a model already found (a creep rung with
-            # an overdamped 21 Hz "mode" refitted to 39.7 nm, while the screen from the base had reached 2.15 nm).
-            if nm in screened:
-                options.append(screened[nm])
-            if not options:
-                continue
-            mm, tth, e = min(options, key=lambda o: rmse(o[2][val]))  # the refit on a tie
-            trial.append((rmse(e[val]), nm, mm, tth, e))
-            s.say(f"refit {mm.name}: validation RMSE {fmt_len(trial[-1][0])}")
-        if not trial:
-            break
-        good = [x for x in trial if cur_val / x[0] >= s.min_factor and paired_t(cur_e[val], x[4][val]) >= s.t_min]
-        pick, why = prefer_simpler(s, [(x[1], x[0], x[4], cands[x[1]].score) for x in good]) if good else (-1, "")
-        # Every candidate refitted on top of this rung now stands for what it adds to it (the ranking of those
-        # the ladder does not take is by that, not by what each did alone on the base).
-        for x in trial:
-            if not good or x is not good[pick]:
-                _on_top(s, cands[x[1]], chosen, cur_e, cur_val, x, significant=False)
-        if not good:
-            break
-        r, nm, mm, tth, e = good[pick]
-        c = cands[nm]
-        c.note = why
-        _on_top(s, c, chosen, cur_e, cur_val, good[pick], significant=True)
-        chosen.append(nm)
-        ladder.append(Rung(mm.name, list(chosen), r, rmse(e[train])))
-        models[mm.name] = (mm, tth)
-        cur_e = e
-    return ladder, models, chosen
-
-
-def _on_top(s: Setup, c: Candidate, chosen: list, cur_e: np.ndarray, cur_val: float, trial: tuple,
-            significant: bool) -> None:
-    """Record on ``c`` what its refit on top of the rung ``chosen`` gave: (rmse, name, model, θ, residual)."""
-    r, nm, mm, tth, e = trial
-    c.on_top_of, c.rmse, c.rmse_train = list(chosen), r, rmse(e[s.train])
-    c.improvement, c.t_stat, c.significant = cur_val / r, paired_t(cur_e[s.val], e[s.val]), significant
-    c.params = _effect_values(mm, tth, nm)
 
 
 def verdict(s: Setup, cands: dict, ladder: list, models: dict[str, tuple[Model, np.ndarray]], chosen: list,
