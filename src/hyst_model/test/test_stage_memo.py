@@ -1,4 +1,5 @@
-"""ComposedModel reuses unchanged inner stages: exactly the same numbers, fewer base simulations."""
+"""ComposedModel reuses unchanged inner stages within a Jacobian: exactly the same numbers, fewer base simulations,
+nothing kept afterwards."""
 import pickle
 
 import numpy as np
@@ -52,35 +53,43 @@ def test_every_single_parameter_step_gives_exactly_a_fresh_models_output(names):
     t, u = _record()
     m = compose(_base(), names, CFG)
     th = _point(m)
-    y0 = m.simulate(th, t, u)
-    for i in reversed(range(th.size)):  # the order of a finite-difference Jacobian
-        tp = th.copy()
-        tp[i] += 1e-4 * max(abs(tp[i]), 1e-3)
-        fresh = compose(_base(), names, CFG)  # no stage remembered
-        np.testing.assert_array_equal(m.simulate(tp, t, u), fresh.simulate(tp, t, u), err_msg=m.names[i])
-    np.testing.assert_array_equal(m.simulate(th, t, u), y0)
-    # another input is another record: nothing reused from the last one
-    u2 = u[::-1].copy()
-    np.testing.assert_array_equal(m.simulate(th, t, u2), compose(_base(), names, CFG).simulate(th, t, u2))
+    with m.reusing_stages():
+        y0 = m.simulate(th, t, u)
+        for i in reversed(range(th.size)):  # the order of a finite-difference Jacobian
+            tp = th.copy()
+            tp[i] += 1e-4 * max(abs(tp[i]), 1e-3)
+            fresh = compose(_base(), names, CFG)  # no stage remembered
+            np.testing.assert_array_equal(m.simulate(tp, t, u), fresh.simulate(tp, t, u), err_msg=m.names[i])
+        np.testing.assert_array_equal(m.simulate(th, t, u), y0)
+        # another input is another record: nothing reused from the last one
+        u2 = u[::-1].copy()
+        np.testing.assert_array_equal(m.simulate(th, t, u2), compose(_base(), names, CFG).simulate(th, t, u2))
 
 
 def test_an_outer_parameter_step_does_not_simulate_the_base_again():
     t, u = _record()
     m = compose(_base(), ["delay", "creep", "saturation"], CFG)
     th = _point(m)
-    m.simulate(th, t, u)
-    _Counting.calls = 0
-    for k in ("creep.gain", "creep.tilt", "saturation.width"):
+    with m.reusing_stages():
+        m.simulate(th, t, u)
+        _Counting.calls = 0
+        for k in ("creep.gain", "creep.tilt", "saturation.width"):
+            tp = th.copy()
+            tp[m.names.index(k)] *= 1.01
+            m.simulate(tp, t, u)
+        assert _Counting.calls == 0
         tp = th.copy()
-        tp[m.names.index(k)] *= 1.01
+        tp[m.names.index("delay.tau")] *= 1.01  # inside: the base sees another input
         m.simulate(tp, t, u)
-    assert _Counting.calls == 0
-    tp = th.copy()
-    tp[m.names.index("delay.tau")] *= 1.01  # inside: the base sees another input
-    m.simulate(tp, t, u)
-    assert _Counting.calls == 1
-    tp[0] *= 1.01  # a base parameter: everything again
-    m.simulate(tp, t, u)
+        assert _Counting.calls == 1
+        tp[0] *= 1.01  # a base parameter: everything again
+        m.simulate(tp, t, u)
+        assert _Counting.calls == 2
+    # outside a Jacobian nothing is remembered: a model kept for later holds no copies of the record
+    assert "_memo" not in m.__dict__
+    _Counting.calls = 0
+    m.simulate(th, t, u)
+    m.simulate(th, t, u)
     assert _Counting.calls == 2
 
 
@@ -108,18 +117,39 @@ def test_an_effect_working_in_place_on_its_inner_output_cannot_corrupt_a_reused_
     th = _point(m)
     th[m.names.index("inplace_test.k")] = 0.5
     y0 = m.simulate(th, t, u).copy()
-    for _ in range(3):  # its own parameter stepped: the creep stage inside it is reused each time
-        tp = th.copy()
-        tp[m.names.index("inplace_test.k")] *= 1.0 + 1e-6
-        m.simulate(tp, t, u)
-        np.testing.assert_array_equal(m.simulate(th, t, u), y0)
+    with m.reusing_stages():
+        for _ in range(3):  # its own parameter stepped: the creep stage inside it is reused each time
+            tp = th.copy()
+            tp[m.names.index("inplace_test.k")] *= 1.0 + 1e-6
+            m.simulate(tp, t, u)
+            np.testing.assert_array_equal(m.simulate(th, t, u), y0)
 
 
-def test_a_pickled_model_leaves_its_stages_behind_and_simulates_the_same():
+def test_a_model_pickled_within_a_jacobian_leaves_its_stages_behind_and_simulates_the_same():
     t, u = _record()
     m = compose(_base(), ["delay", "creep"], CFG)
     th = _point(m)
-    y0 = m.simulate(th, t, u)
-    blob = pickle.dumps(m)
+    with m.reusing_stages():
+        y0 = m.simulate(th, t, u)
+        blob = pickle.dumps(m)
     assert len(blob) < 50_000  # no remembered signals (each stage holds ~3 x 16 kB here)
     np.testing.assert_array_equal(pickle.loads(blob).simulate(th, t, u), y0)
+
+
+def test_a_finite_difference_jacobian_simulates_the_base_once_per_base_parameter_and_once_more():
+    """A structure the chain rule does not cover (a series mode) takes differences of the whole model: the
+    effects' columns reuse the base simulated at θ."""
+    from hyst_model.identify.base import TrainProblem
+    from hyst_model.identify.result import Split
+    t, u = _record()
+    m = compose(_base(), ["dynamics", "creep"], CFG)
+    assert not m.jac_available
+    th = _point(m)
+    p = TrainProblem(m, t, u, m.simulate(th, t, u), Split(0, t.size, t.size, t.size, "all"))
+    p.residuals(th)  # the point LM accepted: its residuals are cached, as in a fit
+    _Counting.calls = 0
+    _, J = p.fd_residuals_jac(th)
+    n_base = len(m.base.names)
+    assert _Counting.calls == n_base + 1, (_Counting.calls, len(m.names))
+    assert np.all(np.isfinite(J)) and np.any(J[:, n_base:] != 0)
+    assert "_memo" not in m.__dict__

@@ -30,7 +30,8 @@ Fixed configuration (``dt``, ``u_scale``, ``y_scale``, ...) reaches the effect t
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -263,27 +264,41 @@ class ComposedModel(Model):
         return theta[: self._nbase], [theta[s] for s in self._slices]
 
     def simulate(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """Output for packed ``theta``; inner stages whose parameters and inputs are unchanged since the last call
-        are reused (:class:`_StageMemo`), so a finite-difference step in an outer effect's parameter does not
-        simulate the base again."""
+        """Output for packed ``theta``. Inside :meth:`reusing_stages`, inner stages whose parameters and inputs are
+        unchanged since the last call are reused, so a finite-difference step in an outer effect's parameter does
+        not simulate the base again."""
         tb, tes = self.split(theta)
         base = self.base
         order = sorted(range(len(self.effects)), key=lambda i: self.effects[i].kind != "base")
         memo = self.__dict__.get("_memo")
-        if memo is None:
-            memo = self.__dict__["_memo"] = _StageMemo(len(order))
 
         def base_simulate(tt: np.ndarray, uu: np.ndarray) -> np.ndarray:
             return base.simulate(tb, tt, uu)
 
-        f: Callable[[np.ndarray, np.ndarray], np.ndarray] = memo.wrap(0, tb.tobytes(), base_simulate)
+        f: Callable[[np.ndarray, np.ndarray], np.ndarray] = base_simulate
         key = tb.tobytes()
+        if memo is not None:
+            f = memo.wrap(0, key, f)
         for j, i in enumerate(order):
             f = _bind(self.effects[i], tes[i], Inner(f, base, tb))
             key += b"|" + tes[i].tobytes()
-            if j + 1 < len(order):  # the outermost stage is the result: the fitters cache that themselves
+            if memo is not None and j + 1 < len(order):  # the outermost stage is the result: not reused here
                 f = memo.wrap(j + 1, key, f)
         return f(np.asarray(t, dtype=np.float64), np.asarray(u, dtype=np.float64))
+
+    @contextmanager
+    def reusing_stages(self) -> Iterator[None]:
+        """Within the block, :meth:`simulate` reuses unchanged inner stages (:class:`_StageMemo`): for the
+        simulations of one Jacobian. Only there — the remembered signals are a few copies of the record per
+        stage, which a model kept for later (the ladder keeps dozens) should not hold."""
+        if "_memo" in self.__dict__:  # nested: the outer block owns it
+            yield
+            return
+        self.__dict__["_memo"] = _StageMemo(len(self.effects))
+        try:
+            yield
+        finally:
+            self.__dict__.pop("_memo", None)
 
     @property
     def jac_available(self) -> bool:
@@ -300,7 +315,7 @@ class ComposedModel(Model):
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
-        state.pop("_memo", None)  # per process and thread; rebuilt on the first simulation
+        state.pop("_memo", None)  # signals of a Jacobian in progress: not part of the model
         return state
 
     def legacy_values(self) -> dict[str, float]:

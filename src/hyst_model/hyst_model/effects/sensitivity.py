@@ -78,6 +78,12 @@ def composed_simulate_jac(model: "ComposedModel", theta: np.ndarray, t: np.ndarr
     forward differences with the step rule of :meth:`hyst_model.identify.base.TrainProblem.fd_residuals_jac`
     (stepping inward at an upper bound), outermost first so unchanged inner stages are reused.
     """
+    with model.reusing_stages():
+        return _simulate_jac(model, theta, t, u)
+
+
+def _simulate_jac(model: "ComposedModel", theta: np.ndarray, t: np.ndarray, u: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
     theta = np.asarray(theta, dtype=np.float64)
     t = np.asarray(t, dtype=np.float64)
     u = np.asarray(u, dtype=np.float64)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import time
+from contextlib import nullcontext
 from collections.abc import Callable
 from typing import Protocol, cast
 
@@ -134,11 +135,15 @@ class TrainProblem:
         """Residuals and a forward-difference Jacobian (p + 1 simulations), stepping inward at bounds.
 
         Parameters the model declares ``inactive`` (the output does not depend on them) get a zero column
-        without a simulation. Columns go last parameter first: a composed model's outer effects come last and
-        its inner stages, unchanged by their steps, are reused from the simulation at ``theta``
-        (:class:`~hyst_model.effects.base.ComposedModel`) before the base parameters' steps replace them.
+        without a simulation. Columns go last parameter first: a composed model's outer effects come last, and
+        its inner stages, unchanged by their steps, are reused (``reusing_stages``) before the base parameters'
+        steps replace them.
         """
-        theta = np.asarray(theta, dtype=np.float64)
+        reuse = getattr(self.model, "reusing_stages", None)
+        with reuse() if reuse is not None else nullcontext():
+            return self._fd_residuals_jac(np.asarray(theta, dtype=np.float64))
+
+    def _fd_residuals_jac(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         r0 = self.residuals(theta)
         J = np.zeros((r0.size, theta.size))
         span = self.upper - self.lower
