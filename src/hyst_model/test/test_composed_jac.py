@@ -13,7 +13,8 @@ from hyst_model.model import MBWModel
 CFG = {"u_scale": 15.0, "y_scale": 5.42e-6, "dt": 1e-3}
 VALUES = {"delay.tau": 1.3e-3, "creep.gain": 0.02, "creep.tilt": 0.1, "asymmetry.a_u": 0.05,
           "asymmetry.a_y": 0.02, "asymmetry.slope": 0.05, "asymmetry.level": 1e-5, "saturation.width": 2e-6,
-          "saturation.top": 1.2e-5, "drift.c1": 3e-9, "drift.c3": -2e-9}
+          "saturation.top": 1.2e-5, "drift.c1": 3e-9, "drift.c3": -2e-9, "dynamics.fn": 300.0,
+          "dynamics.zeta": 0.05, "dynamics.part": 0.3, "dynamics.lag": 0.4}
 
 
 def _record(n=4000):
@@ -35,6 +36,8 @@ def _model(names, extra=None):
 
 
 STACKS = [(["delay", "creep", "asymmetry", "saturation", "drift"], {}),
+          (["delay", "dynamics", "creep"], {}),
+          (["dynamics"], {"dynamics.hold": "foh"}),
           (["creep", "delay"], {"delay.side": "output"}),
           (["asymmetry"], {"asymmetry.form": "kink"}),
           (["saturation", "creep"], {"saturation.two_sided": 1.0})]
@@ -76,9 +79,11 @@ def test_mbw_jacobian_is_the_sensitivity_recursion_in_the_models_layout():
 
 def test_structures_the_chain_rule_does_not_cover_fall_back_to_differences():
     base = MBWModel(u_scale=15.0, y_scale=5.42e-6)
-    for names, extra in ((["dynamics"], {}), (["dynamics"], {"dynamics.structure": "feedback"}),
-                         (["creep", "dynamics"], {})):
-        m = compose(base, names, {**CFG, **extra})
+    bw = MBWModel(u_scale=15.0, y_scale=5.42e-6, rate=False)
+    for b, names, extra in ((base, ["dynamics"], {"dynamics.structure": "feedback"}),
+                            (base, ["creep", "dynamics"], {"dynamics.structure": "feedback"}),
+                            (bw, ["creep", "rate"], {})):
+        m = compose(b, names, {**CFG, **extra})
         assert not m.jac_available
         t, u = _record(1500)
         assert not TrainProblem(m, t, u, np.zeros_like(t), Split(0, t.size, t.size, t.size, "all")).has_jac

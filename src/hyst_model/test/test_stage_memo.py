@@ -108,6 +108,20 @@ class _InPlace(Effect):
         return y
 
 
+class _Wrap(Effect):
+    """A user's effect of kind wrap: sees the inner structure, so only differences of the whole model apply."""
+
+    name = "wrap_test"
+    kind = "wrap"
+
+    def params(self):
+        from hyst_model.model import Param
+        return (Param("k", 0.0, -1.0, 1.0, "", ""),)
+
+    def apply(self, theta, t, u, inner):
+        return inner(t, u) * (1.0 + theta[0])
+
+
 def test_an_effect_working_in_place_on_its_inner_output_cannot_corrupt_a_reused_stage():
     from hyst_model.effects.base import ComposedModel
     from hyst_model.effects import EFFECTS
@@ -137,12 +151,14 @@ def test_a_model_pickled_within_a_jacobian_leaves_its_stages_behind_and_simulate
 
 
 def test_a_finite_difference_jacobian_simulates_the_base_once_per_base_parameter_and_once_more():
-    """A structure the chain rule does not cover (a series mode) takes differences of the whole model: the
-    effects' columns reuse the base simulated at θ."""
+    """A structure the chain rule does not cover (an effect of kind wrap) takes differences of the whole model:
+    the effects' columns reuse the base simulated at θ."""
+    from hyst_model.effects import EFFECTS
+    from hyst_model.effects.base import ComposedModel
     from hyst_model.identify.base import TrainProblem
     from hyst_model.identify.result import Split
     t, u = _record()
-    m = compose(_base(), ["dynamics", "creep"], CFG)
+    m = ComposedModel(_base(), [_Wrap(CFG), EFFECTS["creep"](CFG)])
     assert not m.jac_available
     th = _point(m)
     p = TrainProblem(m, t, u, m.simulate(th, t, u), Split(0, t.size, t.size, t.size, "all"))
@@ -151,5 +167,5 @@ def test_a_finite_difference_jacobian_simulates_the_base_once_per_base_parameter
     _, J = p.fd_residuals_jac(th)
     n_base = len(m.base.names)
     assert _Counting.calls == n_base + 1, (_Counting.calls, len(m.names))
-    assert np.all(np.isfinite(J)) and np.any(J[:, n_base:] != 0)
+    assert np.all(np.isfinite(J)) and np.all(np.any(J[:, n_base:] != 0, axis=0))
     assert "_memo" not in m.__dict__

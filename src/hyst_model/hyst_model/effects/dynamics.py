@@ -210,15 +210,31 @@ class DynamicsEffect(Effect):
         p = np.ascontiguousarray(theta, dtype=np.float64)
         return msd_bw_simulate(p, self._fine(t, u), self.substeps, dt, *map(float, state0))
 
+    @property
+    def acts_on_output(self) -> bool:
+        """The series structure is an output effect in all but name (:meth:`output` on the inner output): a
+        linear operator the fitters carry the base's sensitivities through (:meth:`push`)."""
+        return self.structure == "series"
+
+    def output(self, theta, t, u, y):
+        """Series structure: the mode acting on the inner output ``y`` (at rest at y[0])."""
+        t = np.asarray(t, dtype=np.float64)
+        x = np.asarray(y, dtype=np.float64)
+        dt = sample_time(t) if t.size > 1 else self.dt
+        lag = float(theta[3]) if self._lagged else 0.0
+        ym = series_filter(x, float(theta[0]), float(theta[1]), dt, self.hold, lag)
+        part = float(theta[2])
+        return ym if part == 1.0 else x + part * (ym - x)
+
+    def push(self, theta, t, u, x, y, J):
+        """Series structure: columns of d x / d p through the (linear) mode, d y / d p."""
+        return np.column_stack([self.output(theta, t, u, np.ascontiguousarray(J[:, k]))
+                                for k in range(J.shape[1])]) if J.shape[1] else J
+
     def apply(self, theta, t, u, inner):
         t = np.asarray(t, dtype=np.float64)
         if self.structure == "series":
-            x = np.asarray(inner(t, u), dtype=np.float64)
-            dt = sample_time(t) if t.size > 1 else self.dt
-            lag = float(theta[3]) if self._lagged else 0.0
-            ym = series_filter(x, float(theta[0]), float(theta[1]), dt, self.hold, lag)
-            part = float(theta[2])
-            return ym if part == 1.0 else x + part * (ym - x)
+            return self.output(theta, t, u, inner(t, u))
         offset = 0.0
         try:
             offset = float(inner.model.unpack(inner.theta).get("offset", 0.0))

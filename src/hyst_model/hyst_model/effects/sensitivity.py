@@ -10,7 +10,8 @@ finite differences — cheap, since the composed model reuses its unchanged inne
 (:class:`~hyst_model.effects.base.ComposedModel`).
 
 Available when the base has ``simulate_jac`` and every effect is input- or output-side in the default form (no
-``wrap``/``base`` kind, no overridden ``apply``): :attr:`ComposedModel.jac_available`. Otherwise the fitters fall
+``wrap``/``base`` kind, no overridden ``apply``), or says its ``apply`` is its ``output`` (``acts_on_output``: the
+series mode): :attr:`ComposedModel.jac_available`. Otherwise the fitters fall
 back to finite differences of the whole model, as before.
 """
 from __future__ import annotations
@@ -33,7 +34,13 @@ def jac_available(model: "ComposedModel") -> bool:
     """Whether :func:`composed_simulate_jac` applies to ``model`` (see the module docstring)."""
     from .base import Effect
     return hasattr(model.base, "simulate_jac") and all(
-        e.kind in ("input", "output") and type(e).apply is Effect.apply for e in model.effects)
+        (e.kind in ("input", "output") and type(e).apply is Effect.apply) or _on_output(e) for e in model.effects)
+
+
+def _on_output(effect: "Effect") -> bool:
+    """An effect whose ``apply`` is its ``output`` on the inner output although it says otherwise (the series
+    mode: ``acts_on_output``)."""
+    return bool(getattr(effect, "acts_on_output", False))
 
 
 def push_through(effect: "Effect", theta: np.ndarray, t: np.ndarray, u: np.ndarray, x: np.ndarray,
@@ -97,7 +104,7 @@ def _simulate_jac(model: "ComposedModel", theta: np.ndarray, t: np.ndarray, u: n
             x, Jb = model.base.simulate_jac(tb, t, uu)  # type: ignore[attr-defined]  # jac_available checked it
             return np.asarray(x, dtype=np.float64), np.asarray(Jb, dtype=np.float64)
         e = model.effects[j]
-        if e.kind == "input":
+        if e.kind == "input" and not _on_output(e):
             return sens(j - 1, np.asarray(e.input(tes[j], t, uu), dtype=np.float64))
         x, Jx = sens(j - 1, uu)
         yj = np.asarray(e.output(tes[j], t, uu, x), dtype=np.float64)
