@@ -24,6 +24,10 @@ and implement
 * :meth:`Effect.signature` — the residual test for this effect: ``(score, evidence)`` with score in [0, 1]
   (how strongly the base model's residual looks like this effect) and one sentence of evidence in words.
 
+Optionally, for fitting speed (:mod:`.sensitivity`): an output effect that acts sample by sample sets
+``pointwise = True``; one that knows how to carry the columns of d x / d p through itself exactly defines
+``push(theta, t, u, x, y, J)`` (creep, the series mode). Without either, directional differences are used.
+
 Fixed configuration (``dt``, ``u_scale``, ``y_scale``, ...) reaches the effect through its constructor
 ``Effect(config)``; anything it needs to rebuild itself goes back out through :meth:`Effect.config`.
 """

@@ -78,12 +78,12 @@ from ..errors import EffectError
 from ..model import Param
 from .base import Effect
 from .dynamics_evidence import coherence_test, residual_peak
-from .dynamics_kernels import HOLDS, msd_bw_simulate, series_filter, upsample, zoh_matrices
-from .online import OnlineEffect
+from .dynamics_kernels import HOLDS, msd_bw_simulate, series_filter, upsample
+from .dynamics_online import SeriesResonanceInverse
 from .signals import corr, holds, sample_time, smooth
 
 __all__ = ["DynamicsEffect", "series_filter", "msd_bw_simulate", "upsample", "choose_structure",
-           "StructureChoice", "BENCHMARK_TRUTH", "STRUCTURES", "HOLDS"]
+           "StructureChoice", "SeriesResonanceInverse", "BENCHMARK_TRUTH", "STRUCTURES", "HOLDS"]
 
 STRUCTURES = ("series", "feedback")
 
@@ -413,67 +413,3 @@ def choose_structure(base, t: np.ndarray, u: np.ndarray, y: np.ndarray, *,
         rmse[s] = float(v) if v is not None else float("inf")
     best = min(rmse, key=lambda k: rmse[k])
     return StructureChoice(best, rmse, results)
-
-
-class SeriesResonanceInverse(OnlineEffect):
-    """The series resonance for controllers: inverted on the reference, predicted out of the measurement.
-
-    * target: the ZOH recursion s_k = Φ s_{k−1} + Γ x_k reads y_k = (Φ s_{k−1})_0 + Γ_0 x_k, so the inner output
-      that makes the stage read r_k is x_k = (r_k − (Φ s_{k−1})_0) / Γ_0, with the state driven by the base
-      model's prediction of what the applied input achieved (noise-free; a command cut by the slew or range
-      limit leaves the state where the stage really is, not where the target wanted it); the inverse's zero
-      dynamics are stable where the sampled zero lies inside the unit circle (refused otherwise);
-    * measure: a Smith predictor, y + x̂ − H x̂ with x̂ the base model driven by the applied input, so the law
-      sees the stage without its resonance plus every model error (no inverse filter on sensor noise).
-
-    With a participation ``part`` < 1 the reading is (1 − part)·x + part·(mode output): the direct share adds
-    (1 − part) to the feed-through (x_k = (r_k − part·(Φ s_{k−1})_0) / ((1 − part) + part·Γ_0)) and the
-    predictor subtracts part·(H x̂ − x̂). With a sampling lag (``lag`` > 0, :func:`~.dynamics_kernels.zoh_matrices`)
-    the state also carries the previous inner output (its Γ − Γ_b share), and the feed-through is Γ_b; a lag that
-    puts the sampled zero outside the unit circle is refused like any other.
-
-    ``delay`` (whole samples) reads the mode that many samples late: the reference is previewed by it and the
-    predictor compares the measurement with the reading ``delay`` samples old. A lag of one sample is exactly that
-    (:meth:`DynamicsEffect.online` uses it: the reading then has no feed-through of x_k, so no inverse of its own).
-    """
-
-    name = "dynamics"
-
-    def __init__(self, fn: float, zeta: float, dt: float, base, part: float = 1.0, lag: float = 0.0,
-                 delay: int = 0) -> None:
-        phi, g, gb = zoh_matrices(fn, zeta, dt, lag)
-        # State z = (s, x_{k−1}): z_k = A z_{k−1} + B x_k reads the mode's s_k = Φ s_{k−1} + (Γ − Γ_b) x_{k−1}
-        # + Γ_b x_k (sampling lag, zoh_matrices; lag 0: Γ_b = Γ and x_{k−1} drops out).
-        self._A = np.zeros((3, 3))
-        self._A[:2, :2], self._A[:2, 2] = phi, g - gb
-        self._B = np.r_[gb, 1.0]
-        self._part = float(part)
-        self._d = (1.0 - self._part) + self._part * float(gb[0])  # feed-through of x_k to y_k
-        if not abs(self._d) > 1e-9:
-            raise ValueError(f"a {fn:g} Hz resonance has no direct feed-through at dt = {dt:g} s")
-        zeros = np.linalg.eigvals(self._A - self._part * np.outer(self._B, self._A[0]) / self._d)
-        if np.max(np.abs(zeros)) >= 0.999:
-            raise ValueError(f"the {fn:g} Hz resonance's sampled zero lies on or outside the unit circle"
-                             + (f" (read {lag:.2f} samples into the hold)" if lag > 0 else "")
-                             + ": its inverse would diverge")
-        self._pred = base()
-        self._s = np.zeros(3)  # resonance state (and the last input) driven by the base model's prediction
-        if delay < 0:
-            raise ValueError("the reading's delay must be a whole number of samples >= 0")
-        self.preview = delay * dt
-        self._read = np.zeros(delay + 1)  # the model's reading, newest first
-
-    def reset(self, y, u):
-        x0 = self._pred.reset(u)
-        self._s[:] = (x0, 0.0, x0)
-        self._read[:] = x0
-
-    def measure(self, y, u):
-        x_hat = self._pred.step(u)
-        self._s = self._A @ self._s + self._B * x_hat
-        self._read[1:] = self._read[:-1]
-        self._read[0] = (1.0 - self._part) * x_hat + self._part * float(self._s[0])
-        return y - float(self._read[-1]) + x_hat
-
-    def target(self, r, u):
-        return (r - self._part * float((self._A @ self._s)[0])) / self._d
