@@ -61,20 +61,27 @@ def test_the_jacobian_matches_central_differences_column_by_column(names, extra)
         assert np.linalg.norm(J[:, i] - c) <= 1e-4 * scale + 1e-30, m.names[i]
 
 
-def test_mbw_jacobian_is_the_sensitivity_recursion_in_the_models_layout():
+def test_mbw_jacobian_matches_central_differences():
+    """The MBW's forward sensitivities (core/sensitivity.py), in the model's layout and scale, with the offset."""
     t, u = _record()
     m = MBWModel(u_scale=15.0, y_scale=5.42e-6)
     th = m.theta0.copy()
     th[:8] = list(THESIS_TABLE41.vector)
     th[-1] = 1e-7
     y, J = m.simulate_jac(th, t, u)
-    p = m.to_params(th)
-    un = np.ascontiguousarray(u / 15.0)
-    y0, S0 = mbw_rest_state_sens(p.vector, un[0])
-    ym, S = mbw_simulate_sens(p.vector, un, y0, S0)
-    np.testing.assert_array_equal(J[:, :-1], m.y_scale * S)
-    np.testing.assert_array_equal(J[:, -1], 1.0)
     np.testing.assert_array_equal(y, m.simulate(th, t, u))
+    np.testing.assert_array_equal(J[:, -1], 1.0)
+    lo, hi = m.bounds
+    for i in range(th.size - 1):
+        h = 1e-6 * max(abs(th[i]), 1e-3 * (hi[i] - lo[i]))
+        a, b = th.copy(), th.copy()
+        a[i] += h
+        b[i] -= h
+        c = (m.simulate(a, t, u) - m.simulate(b, t, u)) / (2 * h)
+        assert np.linalg.norm(J[:, i] - c) <= 1e-4 * np.linalg.norm(c), m.names[i]
+    _, S = mbw_simulate_sens(m.to_params(th).vector, np.ascontiguousarray(u / 15.0), *mbw_rest_state_sens(
+        m.to_params(th).vector, u[0] / 15.0))
+    np.testing.assert_array_equal(J[:, :-1], m.y_scale * S)  # the unscaled recursion is the same numbers
 
 
 def test_structures_the_chain_rule_does_not_cover_fall_back_to_differences():

@@ -70,30 +70,6 @@ def mbw_rest_state_sens(p: np.ndarray, u0: float, max_steps: int = 200000, tol: 
 
 
 @njit(cache=True)
-def mbw_simulate_sens(p: np.ndarray, u: np.ndarray, y0: float, S0: np.ndarray):
-    """Simulate (3.21) from state ``y0`` (with gradient ``S0``) and return ``(y, S)``, S of shape (n, 8).
-
-    ``u_{-1} = u[0]`` as in :func:`hyst_model.core.mbw.mbw_simulate`.
-    """
-    n = u.shape[0]
-    y = np.empty(n)
-    S = np.empty((n, 8))
-    Sp = S0.copy()
-    Sk = np.empty(8)
-    yp = y0
-    up = u[0] if n else 0.0
-    for k in range(n):
-        yk = mbw_step(p, yp, u[k], up)
-        _sens_step(p, yp, u[k], up, Sp, Sk)
-        y[k] = yk
-        S[k, :] = Sk
-        Sp[:] = Sk
-        yp = yk
-        up = u[k]
-    return y, S
-
-
-@njit(cache=True)
 def mbw_simulate_jac(p: np.ndarray, u: np.ndarray, y0: float, S0: np.ndarray, cols: np.ndarray,
                      y_scale: float, offset: float):
     """:func:`mbw_simulate_sens` written straight into the model's Jacobian layout: ``(y_scale·y + offset, J)``
@@ -121,6 +97,19 @@ def mbw_simulate_jac(p: np.ndarray, u: np.ndarray, y0: float, S0: np.ndarray, co
         yp = yk
         up = u[k]
     return y, J
+
+
+def mbw_simulate_sens(p: np.ndarray, u: np.ndarray, y0: float, S0: np.ndarray):
+    """Simulate (3.21) from state ``y0`` (with gradient ``S0``) and return ``(y, S)``, S of shape (n, 8).
+
+    ``u_{-1} = u[0]`` as in :func:`hyst_model.core.mbw.mbw_simulate`. (:func:`mbw_simulate_jac` with every
+    parameter, unit scale and no offset.)
+    """
+    y, J = mbw_simulate_jac(p, u, y0, S0, _ALL8, 1.0, 0.0)
+    return y, J[:, :8]
+
+
+_ALL8 = np.arange(8)
 
 
 @njit(cache=True)
