@@ -369,7 +369,7 @@ class _StageMemo:
 
     @staticmethod
     def _same(a: np.ndarray, b: np.ndarray) -> bool:
-        return a is b or (a.shape == b.shape and bool(np.array_equal(a, b)))
+        return a.shape == b.shape and bool(np.array_equal(a, b))  # b is a copy: compared by value
 
     def wrap(self, stage: int, key: bytes, f: Callable[[np.ndarray, np.ndarray], np.ndarray]
              ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
