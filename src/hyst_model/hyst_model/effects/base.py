@@ -26,7 +26,8 @@ and implement
 
 Optionally, for fitting speed (:mod:`.sensitivity`): an output effect that acts sample by sample sets
 ``pointwise = True``; one that knows how to carry the columns of d x / d p through itself exactly defines
-``push(theta, t, u, x, y, J)`` (creep, the series mode). Without either, directional differences are used.
+``push(theta, t, u, x, y, J)`` (creep, all columns in one pass). A ``linear`` one is applied to each column;
+otherwise directional differences are used.
 
 Fixed configuration (``dt``, ``u_scale``, ``y_scale``, ...) reaches the effect through its constructor
 ``Effect(config)``; anything it needs to rebuild itself goes back out through :meth:`Effect.config`.

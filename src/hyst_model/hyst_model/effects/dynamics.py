@@ -213,7 +213,7 @@ class DynamicsEffect(Effect):
     @property
     def acts_on_output(self) -> bool:
         """The series structure is an output effect in all but name (:meth:`output` on the inner output): a
-        linear operator the fitters carry the base's sensitivities through (:meth:`push`)."""
+        linear operator (:attr:`linear`) the fitters carry the base's sensitivities through, column by column."""
         return self.structure == "series"
 
     def output(self, theta, t, u, y):
@@ -225,11 +225,6 @@ class DynamicsEffect(Effect):
         ym = series_filter(x, float(theta[0]), float(theta[1]), dt, self.hold, lag)
         part = float(theta[2])
         return ym if part == 1.0 else x + part * (ym - x)
-
-    def push(self, theta, t, u, x, y, J):
-        """Series structure: columns of d x / d p through the (linear) mode, d y / d p."""
-        return np.column_stack([self.output(theta, t, u, np.ascontiguousarray(J[:, k]))
-                                for k in range(J.shape[1])]) if J.shape[1] else J
 
     def apply(self, theta, t, u, inner):
         t = np.asarray(t, dtype=np.float64)
