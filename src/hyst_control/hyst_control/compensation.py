@@ -56,6 +56,9 @@ class Compensation:
     unused: dict = field(default_factory=dict)
     #: The params file's effect order (reports use it; :attr:`used` may apply them in another, equivalent one).
     order: list = field(default_factory=list)
+    #: The compensation's own per-sample base model (:class:`~hyst_model.effects.online.Stepper`): with it the
+    #: Smith predictors and the effects inside them are predicted as one chain (:attr:`chain`).
+    base: object | None = None
 
     @property
     def names(self) -> list[str]:
@@ -81,12 +84,43 @@ class Compensation:
             lo, hi = max(lo, a), min(hi, b)
         return lo, hi
 
+    @property
+    def chain(self) -> int:
+        """How many innermost effects are predicted as one chain from :attr:`base`: the innermost run of
+        predictive effects (:attr:`~hyst_model.effects.online.OnlineEffect.predictive`), if it holds a Smith
+        predictor (:attr:`~hyst_model.effects.online.OnlineEffect.smith`); 0: none, each effect measures on its
+        own. Effects outside the outermost Smith predictor still measure by their own inverse; the chain gives
+        their targets the preview (creep's lags as they will be when the previewed sample arrives).
+
+        A Smith predictor alone compares the measurement with its own effect on the bare base model: with a
+        delay and a mode both on the base each took the other's share for model error (DPPC saturated on its own
+        model), and a mode outside a bent loop (asymmetry) compared with the unbent prediction. The chain
+        subtracts the whole model's predicted measurement instead, and drives each inverse's target state with the
+        prediction of the structure inside it.
+        """
+        if self.base is None:
+            return 0
+        n, smith = 0, False
+        for e in self.used:
+            if not getattr(e, "predictive", False):
+                break
+            n += 1
+            smith = smith or getattr(e, "smith", False)
+        return n if smith else 0
+
     def reset(self, y: float, u: float) -> float:
         """Start at rest at measured ``y`` under ``u``; returns the base model's output there."""
         x = y
         for e in reversed(self.used):
             e.reset(x, u)
             x = e.target(x, u)
+        n = self.chain
+        if n:
+            z = self.base.reset(u)
+            w = z
+            for i, e in enumerate(self.used[:n]):
+                e.start(z, u)
+                z, w = e.forward(z, w, u, i == 0)  # at rest: the stage's rest value through the effect
         return x
 
     def measure(self, y: float, u: float, sensor: bool = True) -> float:
@@ -94,8 +128,19 @@ class Compensation:
 
         ``sensor`` False: ``y`` is the law's own aim, not a reading (open loop); observers (drift) are not fed.
         """
-        for e in reversed(self.used):
+        n = self.chain
+        if n:
+            x_hat = z = w = self.base.step(u)
+            pred = []
+            for i, e in enumerate(self.used[:n]):
+                z, w = e.forward(z, w, u, i == 0)
+                pred.append(z)
+        for e in reversed(self.used[n:]):
             y = e.measure(y, u)
+        for i in range(n - 1, -1, -1):
+            e = self.used[i]
+            # a Smith predictor: the measurement minus the model through it plus the model inside it
+            y = y - pred[i] + (pred[i - 1] if i else x_hat) if e.smith else e.measure(y, u)
         if sensor:
             for e in self.used:
                 e.observe(y, u)
@@ -214,6 +259,7 @@ def plan_compensation(model: MBWParams, effects: Sequence[str], values: Mapping[
             comp.used.append(on)
     comp.unused = {e: comp.unused[e] for e in order if e in comp.unused}  # in the params file's order
     comp.order = list(order)
+    comp.base = MBWStepper(model)
     return comp
 
 

@@ -180,3 +180,34 @@ def test_series_resonance_read_into_the_hold_may_have_no_inverse(lag, match):
     else:
         assert inv is None
         assert match in eff.online_note and "gains are still checked" in eff.online_note
+
+
+@pytest.mark.parametrize("name,cfg,theta", [
+    ("asymmetry", {}, [0.03, -0.04]),
+    ("asymmetry", {"form": "kink"}, [0.3, 5e-6]),
+    ("saturation", {"two_sided": True}, None),
+])
+def test_static_forward_predictions_are_the_effects_own_maps(name, cfg, theta):
+    """The chain prediction (:meth:`OnlineEffect.forward`) of a static effect is the batch model's output for the
+    same input, on both streams, and undoes the effect's measurement inverse."""
+    t, u, x = _record()
+    eff = EFFECTS[name]({**CFG, **cfg})
+    if name == "asymmetry" and not cfg:
+        eff.u_c, eff.y_c = 75.0, float(np.mean(x))
+    if theta is None:  # a limit 20 % inside the record's range at each end, a knee of 10 %
+        lo, hi = float(np.min(x)), float(np.max(x))
+        span = hi - lo
+        theta = [hi - 0.2 * span, lo + 0.2 * span, 0.1 * span]
+    theta = np.array(theta, dtype=float)
+    y = eff.output(theta, t, u, x)
+    assert np.max(np.abs(y - x)) > 1e-8  # the effect is really there
+    on = eff.online(theta)
+    assert on.predictive and not on.smith
+    fz = np.array([on.forward(float(a), float(a), float(b), True) for a, b in zip(x, u)])
+    np.testing.assert_allclose(fz[:, 0], y, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(fz[:, 0], fz[:, 1])
+    back = np.array([on.forward(on.measure(float(a), float(b)), 0.0, float(b), True)[0] for a, b in zip(y, u)])
+    lo, hi = on.bounds()  # saturation: a reading past REACH of the knee is held there, not inverted
+    inside = (y > lo) & (y < hi)
+    assert inside.mean() > 0.8
+    np.testing.assert_allclose(back[inside], y[inside], rtol=0, atol=1e-12)

@@ -167,6 +167,7 @@ class AsymmetryInverse(OnlineEffect):
     Beyond the fold (1 − 4·a_y·q < 0) no x gives y: the fold itself (z = −1/(2·a_y)) is returned."""
 
     name = "asymmetry"
+    predictive = True
 
     def __init__(self, a_u: float, a_y: float, u_c: float, y_c: float, u_scale: float, y_scale: float) -> None:
         self._au, self._ay, self._uc, self._yc = a_u, a_y, u_c, y_c
@@ -178,6 +179,13 @@ class AsymmetryInverse(OnlineEffect):
         disc = 1.0 - 4.0 * self._ay * q
         z = -2.0 * q / (1.0 + math.sqrt(disc)) if disc >= 0.0 else -1.0 / (2.0 * self._ay)
         return self._yc + self._ys * z
+
+    def _outer(self, x: float, u: float) -> float:
+        uu, z = (u - self._uc) / self._us, (x - self._yc) / self._ys
+        return x + self._ys * (self._au * uu * uu + self._ay * z * z)
+
+    def forward(self, z, w, u, first):
+        return self._outer(z, u), self._outer(w, u)
 
     def measure(self, y, u):
         return self._inner(y, u)
@@ -191,6 +199,7 @@ class KinkInverse(OnlineEffect):
     the piecewise-linear inverse (the map is monotonic for slope > −1; a few iterations reach rounding)."""
 
     name = "asymmetry"
+    predictive = True
 
     def __init__(self, slope: float, level: float, width: float) -> None:
         if not slope > -1.0:
@@ -210,6 +219,13 @@ class KinkInverse(OnlineEffect):
             if abs(step) <= 1e-15 * max(abs(x), w):
                 break
         return x
+
+    def _outer(self, x: float) -> float:
+        v = (x - self._l) / self._w
+        return x + self._a * self._w * (max(v, 0.0) + math.log1p(math.exp(-abs(v))))
+
+    def forward(self, z, w, u, first):
+        return self._outer(z), self._outer(w)
 
     def measure(self, y, u):
         return self._inner(y)

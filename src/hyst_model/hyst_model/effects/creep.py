@@ -167,9 +167,15 @@ class CreepInverse(OnlineEffect):
     y = x − g·N·Σ w_i·a_i·(x − c_i) (c_i before the update, N = n/PER_DECADE), linear in x:
     x = (y − g·N·Σ w_i a_i c_i) / (1 − g·N·Σ w_i a_i). The lags are then driven by the recovered x, so the
     inverse follows the stage's own creep history.
+
+    In a compensation's prediction chain (:meth:`forward`, after a delay), the target reads the lags as they
+    will be when the previewed sample arrives: the measured lags plus what the model predicts they move over the
+    preview (lags driven by the undelayed minus the delayed prediction; the lags are linear). Without it the
+    target inverted with the lags of now: 5-7 nm off its own model with a 1.5 ms delay on a 30 Hz sine.
     """
 
     name = "creep"
+    predictive = True
 
     def __init__(self, gain: float, tilt: float, dt: float) -> None:
         self._a = np.exp(-dt / TAUS)
@@ -179,12 +185,26 @@ class CreepInverse(OnlineEffect):
         if not self._den > 0.05:  # gain·N·Σ w a ≥ 0.95: the operator is not invertible per sample
             raise ValueError(f"creep gain {gain:g} is too large to invert per sample")
         self._c = np.zeros(TAUS.size)
+        self._cz = np.zeros(TAUS.size)  # lags driven by the chain's predicted measurement
+        self._cw = np.zeros(TAUS.size)  # ... and by the prediction without delays (preview ahead)
 
     def reset(self, y, u):
         self._c[:] = y  # at rest the lags sit at the displacement: no creep deficit
 
-    def _inner(self, y: float) -> float:
-        return (y - self._g * float(self._wa @ self._c)) / self._den
+    def start(self, x, u):
+        self._cz[:] = self._cw[:] = x
+
+    def forward(self, z, w, u, first):
+        a, g = self._a, self._g
+        yz = z - g * float(self._wa @ (z - self._cz))
+        yw = w - g * float(self._wa @ (w - self._cw))
+        self._cz = a * self._cz + (1.0 - a) * z
+        self._cw = a * self._cw + (1.0 - a) * w
+        return yz, yw
+
+    def _inner(self, y: float, c: np.ndarray | None = None) -> float:
+        c = self._c if c is None else c
+        return (y - self._g * float(self._wa @ c)) / self._den
 
     def measure(self, y, u):
         x = self._inner(y)
@@ -192,4 +212,4 @@ class CreepInverse(OnlineEffect):
         return x
 
     def target(self, r, u):
-        return self._inner(r)
+        return self._inner(r, self._c + (self._cw - self._cz))

@@ -171,6 +171,8 @@ class DelayPredictor(OnlineEffect):
 
     name = "delay"
 
+    smith = predictive = True
+
     def __init__(self, tau: float, dt: float, side: str, base) -> None:
         self.preview = tau
         d = tau / dt
@@ -180,6 +182,7 @@ class DelayPredictor(OnlineEffect):
         self._side = side
         self._now = base()
         self._late = base() if side == "input" else None
+        self._fwd = np.zeros(self._k0 + 2)  # the chain's predicted measurement (forward), newest first
 
     def reset(self, y, u):
         x0 = self._now.reset(u)
@@ -188,10 +191,23 @@ class DelayPredictor(OnlineEffect):
             self._hist[:] = u
         else:
             self._hist[:] = x0
+        self._fwd[:] = x0
 
-    def _delayed(self) -> float:
-        h = self._hist
+    def _delayed(self, h: np.ndarray | None = None) -> float:
+        h = self._hist if h is None else h
         return (1.0 - self._frac) * h[self._k0] + self._frac * h[self._k0 + 1]
+
+    def start(self, x, u):
+        self._fwd[:] = x
+
+    def forward(self, z, w, u, first):
+        if first and self._late is not None:  # innermost on the input side: the base on the delayed input, exact
+            self._hist[1:] = self._hist[:-1]
+            self._hist[0] = u
+            return self._late.step(self._delayed()), w
+        self._fwd[1:] = self._fwd[:-1]
+        self._fwd[0] = z
+        return self._delayed(self._fwd), w
 
     def measure(self, y, u):
         x_now = self._now.step(u)

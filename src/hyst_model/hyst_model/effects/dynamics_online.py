@@ -32,6 +32,7 @@ class SeriesResonanceInverse(OnlineEffect):
     """
 
     name = "dynamics"
+    smith = predictive = True
 
     def __init__(self, fn: float, zeta: float, dt: float, base, part: float = 1.0, lag: float = 0.0,
                  delay: int = 0) -> None:
@@ -56,18 +57,26 @@ class SeriesResonanceInverse(OnlineEffect):
             raise ValueError("the reading's delay must be a whole number of samples >= 0")
         self.preview = delay * dt
         self._read = np.zeros(delay + 1)  # the model's reading, newest first
+        self._fs = np.zeros(3)  # the same driven by the predicted measurement (forward: may be delayed)
 
     def reset(self, y, u):
-        x0 = self._pred.reset(u)
-        self._s[:] = (x0, 0.0, x0)
-        self._read[:] = x0
+        self.start(self._pred.reset(u), u)
+
+    def start(self, x, u):
+        self._s[:] = self._fs[:] = (x, 0.0, x)
+        self._read[:] = x
+
+    def forward(self, z, w, u, first):
+        p = self._part
+        self._s = self._A @ self._s + self._B * w
+        self._fs = self._A @ self._fs + self._B * z
+        self._read[1:] = self._read[:-1]
+        self._read[0] = (1.0 - p) * z + p * float(self._fs[0])
+        return float(self._read[-1]), (1.0 - p) * w + p * float(self._s[0])
 
     def measure(self, y, u):
         x_hat = self._pred.step(u)
-        self._s = self._A @ self._s + self._B * x_hat
-        self._read[1:] = self._read[:-1]
-        self._read[0] = (1.0 - self._part) * x_hat + self._part * float(self._s[0])
-        return y - float(self._read[-1]) + x_hat
+        return y - self.forward(x_hat, x_hat, u, True)[0] + x_hat
 
     def target(self, r, u):
         return (r - self._part * float((self._A @ self._s)[0])) / self._d

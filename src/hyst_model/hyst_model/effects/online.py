@@ -59,6 +59,29 @@ class OnlineEffect:
         """Reachable range of this effect's output (m); ``(-inf, inf)`` when unbounded."""
         return (-math.inf, math.inf)
 
+    #: True when :meth:`forward` predicts this effect's output from the inner structure's (static maps, the
+    #: Smith predictors).
+    predictive: bool = False
+    #: True when :meth:`measure` is a Smith predictor (delay, series resonance): the measurement minus the model's
+    #: prediction through this effect plus the prediction without it. With a compensation's own base model, such
+    #: effects and the predictive ones inside them are predicted as one chain (each alone compares the
+    #: measurement with its own effect on the bare base, wrong by the other effects' share: DPPC with a delay and
+    #: a mode saturated on its own model).
+    smith: bool = False
+
+    def start(self, x: float, u: float) -> None:
+        """Predictive effects: rest with the inner structure's predicted output ``x`` (m) under input ``u`` (V)."""
+
+    def forward(self, z: float, w: float, u: float, first: bool) -> tuple[float, float]:
+        """Predictive effects: advance one sample of the model's prediction through this effect.
+
+        ``z`` is the inner structure's predicted *measurement* for the newest applied input ``u``, ``w`` the same
+        without any delay (the prediction ``preview`` ahead: delays commute with the other time-invariant stages);
+        returns both through this effect. :meth:`target` reads the state ``w`` drives (it aims ``preview`` ahead).
+        ``first``: this effect is innermost (``z`` = ``w`` = the base model's prediction).
+        """
+        raise NotImplementedError(f"{self.name} has no forward prediction")
+
     def observe(self, x: float, u: float) -> None:
         """After a measurement went through every effect: ``x`` (m) is the base-level value the law will see.
 

@@ -121,6 +121,7 @@ class SaturationInverse(OnlineEffect):
     name = "saturation"
     #: Fraction of the knee width a target may reach (tanh(2.65) = 0.99: 2.65 widths into the knee).
     REACH = 0.99
+    predictive = True
 
     def __init__(self, top: float, bottom: float, width: float, two_sided: bool) -> None:
         self._top, self._bot, self._w, self._two = top, bottom, width, two_sided
@@ -136,6 +137,19 @@ class SaturationInverse(OnlineEffect):
             if y < k:
                 return k - w * math.atanh(min((k - y) / w, self.REACH))
         return y
+
+    def _outer(self, x: float) -> float:
+        w = self._w
+        k = self._top - w
+        if x > k:
+            return k + w * math.tanh((x - k) / w)
+        k = self._bot + w
+        if self._two and x < k:
+            return k - w * math.tanh((k - x) / w)
+        return x
+
+    def forward(self, z, w, u, first):
+        return self._outer(z), self._outer(w)
 
     def measure(self, y, u):
         return self._inner(y)
