@@ -46,8 +46,9 @@ def run_case(args: tuple[int, str | None]) -> dict:
     except Exception as err:  # noqa: BLE001 - a failing case is a result, not a crash
         out.update(error=f"{type(err).__name__}: {err}", named=["error"], seconds=time.perf_counter() - t0)
         return out
-    named = [r for r in d.ladder[-1].effects] if d.missing not in ("none", "unexplained") else [d.missing]
     ranked = [cd.effect for cd in d.candidates]
+    # in the order the ladder found them (the ranking starts with them); the rung lists them as applied
+    named = ranked[:len(d.ladder[-1].effects)] if d.missing not in ("none", "unexplained") else [d.missing]
     bm, bth = d.models[d.base]
     fm, fth = d.models[d.ladder[-1].model]
     warm = int(0.1 * c.t.size)            # both models start from rest: score after the first 10 %

@@ -19,6 +19,7 @@ from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
+from .ladder import effect_order
 from .refit import _simulate, guarded_refit, paired_t, rmse
 from .stages import Rung, Setup
 
@@ -44,8 +45,9 @@ def prune(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], c
         full_c = cast(ComposedModel, m_full)
         values = full_c.unpack(th_full)
         trials = []
+        applied = effect_order(m_full)  # refits keep the order the model applies its effects in
         for nm in kept:
-            rest = [k for k in kept if k != nm]
+            rest = [k for k in applied if k != nm]
             start = {k: v for k, v in values.items() if not k.startswith(nm + ".")}  # the final point without nm
             try:
                 mm, th, yh = guarded_refit(s.base_model, rest, s.cfg, t, u, y, val, start,
@@ -72,6 +74,6 @@ def prune(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], c
         m_full, th_full, e_full, r_full = mm, th, e, r
         changed = True
     if changed:
-        ladder.append(Rung(m_full.name, list(kept), r_full, rmse(e_full[train])))
+        ladder.append(Rung(m_full.name, effect_order(m_full), r_full, rmse(e_full[train])))
         models[m_full.name] = (m_full, th_full)
     return kept

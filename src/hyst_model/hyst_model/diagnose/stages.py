@@ -66,6 +66,8 @@ class Rung:
     """One step of the error ladder."""
 
     model: str
+    #: The rung's effects in the order its model applies them (innermost first: what ``hyst fit --effects``
+    #: takes); the order they were found in is the diagnosis's ranking.
     effects: list
     rmse: float
     rmse_train: float
