@@ -131,6 +131,7 @@ def _csv(tmp_path, n):
     (["--effects", "creep,wobble"], "unknown effect 'wobble'"),
     (["--effects", "rate"], "already part of the mbw base"),
     (["--effects", "creep,creep"], "lists an effect twice"),
+    (["--jobs", "0"], "--jobs must be at least 1"),
 ])
 def test_bad_effect_choices_exit_2_with_one_line(tmp_path, capsys, extra, message):
     rc = main(["diagnose", str(_csv(tmp_path, 3000)), "--quiet", *extra])

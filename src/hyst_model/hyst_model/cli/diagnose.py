@@ -40,6 +40,9 @@ def register(subparsers) -> None:
     p.add_argument("--force", action="store_true", help="allow --report/--out to replace existing output")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--quiet", action="store_true", help="no progress display on stderr")
+    p.add_argument("--jobs", type=int, default=None, metavar="N",
+                   help="threads fitting the candidates side by side (default: the processors, at most 6; "
+                        "the result does not depend on it)")
     from .fit import add_data_options
     add_data_options(p)
     p.set_defaults(func=run)
@@ -90,7 +93,9 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.report, force=args.force, what="--report", directory=True)
     from ..diagnose.diagnose import diagnose
     from ..effects import load_effect_module
-    from ..errors import EffectError
+    from ..errors import EffectError, HystError
+    if args.jobs is not None and args.jobs < 1:
+        raise HystError(f"--jobs must be at least 1, not {args.jobs}")
     from .fit import load_checked
 
     for path in args.effect_module:
@@ -102,7 +107,8 @@ def run(args: argparse.Namespace) -> int:
     from .fit import parse_config
     user_cfg = parse_config(args.config, names or sorted(EFFECTS))
     rec = load_checked(args)
-    d = diagnose(rec.t, rec.u, rec.y, base=args.base, effects=names, progress=not args.quiet, config=user_cfg)
+    d = diagnose(rec.t, rec.u, rec.y, base=args.base, effects=names, progress=not args.quiet, config=user_cfg,
+                 jobs=args.jobs)
     out_path = None
     if args.out:
         from ..io import spec_from_model, write_params

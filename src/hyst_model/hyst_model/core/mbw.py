@@ -47,7 +47,7 @@ __all__ = [
 PARAM_NAMES: tuple[str, ...] = ("zeta1", "zeta2", "psi1", "psi2", "alpha1", "alpha2", "delta1", "delta2")
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False)
 def mbw_step(p: np.ndarray, y_prev: float, u: float, u_prev: float) -> float:
     """One step of the MBW recursion (3.21) in model units.
 
@@ -72,7 +72,7 @@ def mbw_step(p: np.ndarray, y_prev: float, u: float, u_prev: float) -> float:
             - (p[4] + p[5] * v) * nu * abs(y_prev))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def mbw_rest_state(p: np.ndarray, u0: float, max_steps: int = 200000, tol: float = 1e-13) -> float:
     r"""Output the recursion settles to when the input has been held at ``u0`` for a long time.
 
@@ -99,7 +99,7 @@ def mbw_rest_state(p: np.ndarray, u0: float, max_steps: int = 200000, tol: float
     return b / den
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def mbw_simulate(p: np.ndarray, u: np.ndarray, y0: float = 0.0, u_prev: float = np.nan) -> np.ndarray:
     """Run the MBW recursion (3.21) over a whole input record (model units).
 
@@ -131,7 +131,7 @@ def mbw_simulate(p: np.ndarray, u: np.ndarray, y0: float = 0.0, u_prev: float = 
     return y
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def mbw_simulate_batch(P: np.ndarray, u: np.ndarray, y0: np.ndarray) -> np.ndarray:
     """Simulate many parameter sets on one input at once (swarms, multi-start), in parallel.
 

@@ -23,7 +23,7 @@ from .mbw import mbw_step
 __all__ = ["mbw_simulate_sens", "mbw_simulate_jac", "mbw_rest_state_sens", "mbw_normal_equations"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sens_step(p, yp, u, up, S_prev, S_out):
     nu = u - p[7] * up
     v = abs(u - up)
@@ -45,7 +45,7 @@ def _sens_step(p, yp, u, up, S_prev, S_out):
     S_out[7] = dfdy * S_prev[7] - dfdnu * up
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def mbw_rest_state_sens(p: np.ndarray, u0: float, max_steps: int = 200000, tol: float = 1e-13):
     """Rest state (closed form, see :func:`hyst_model.core.mbw.mbw_rest_state`) and its gradient (8,)."""
     S = np.zeros(8)
@@ -69,7 +69,7 @@ def mbw_rest_state_sens(p: np.ndarray, u0: float, max_steps: int = 200000, tol: 
     return y, S
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def mbw_simulate_jac(p: np.ndarray, u: np.ndarray, y0: float, S0: np.ndarray, cols: np.ndarray,
                      y_scale: float, offset: float):
     """:func:`mbw_simulate_sens` written straight into the model's Jacobian layout: ``(y_scale·y + offset, J)``
@@ -112,7 +112,7 @@ def mbw_simulate_sens(p: np.ndarray, u: np.ndarray, y0: float, S0: np.ndarray):
 _ALL8 = np.arange(8)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def mbw_normal_equations(p: np.ndarray, un: np.ndarray, y0: float, S0: np.ndarray, cols: np.ndarray,
                          y_scale: float, offset: float, a: int, target: np.ndarray, inv_scale: float):
     """Gauss-Newton normal equations of the free-run output error, fused into one pass over the record.

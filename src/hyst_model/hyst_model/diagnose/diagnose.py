@@ -41,6 +41,7 @@ from ..effects.signals import noise_floor, sample_time, fmt_len
 from ..errors import DataError, FitError
 from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scales, _simulate, candidate_names,
                     default_fitter, guarded_refit, refit, rmse, validation_mask)
+from .parallel import default_jobs
 from .prune import prune
 from .ladder import climb
 from .stages import Candidate, Rung, Setup, refit_all, screen_all, verdict
@@ -91,7 +92,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
              min_factor: float = 1.1, t_min: float = 3.0, noise_margin: float = 1.1,
              unexplained_factor: float = UNEXPLAINED_FACTOR,
              full_rate_top: int = 6, max_rungs: int = 3, progress: bool | Callable = False,
-             config: dict | None = None) -> Diagnosis:
+             config: dict | None = None, jobs: int | None = None) -> Diagnosis:
     """Fit ``base``, test each effect by its residual signature and a validated refit, name the missing one.
 
     Parameters
@@ -130,6 +131,9 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         Effect configuration the user fixes (``{"dynamics.interp": "fft", "dynamics.structure": "feedback"}``):
         it overrides the data-derived settings, and an effect's variants that would change a fixed key are not
         tried.
+    jobs : int, optional
+        Threads fitting the candidates side by side (default: the processors available, at most 6). The result
+        does not depend on it (:mod:`hyst_model.diagnose.parallel`).
 
     Raises
     ------
@@ -175,7 +179,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     noise = noise_floor(y)
     noise = min(noise, noise_floor(e_base)) if noise_floor(e_base) > 0 else noise
     s = Setup(t, u, y, val, dt, cfg, fixed, base, base_model, names, fit_, say, noise, th_base, e_base,
-              min_factor, t_min, noise_margin, full_rate_top, max_rungs)
+              min_factor, t_min, noise_margin, full_rate_top, max_rungs,
+              default_jobs() if jobs is None else max(1, int(jobs)))
     say(f"base {base}: validation RMSE {fmt_len(s.base_val)}, noise floor {fmt_len(noise)}"
         + (" (at the noise floor)" if s.at_floor else ""), step=False)
 

@@ -11,6 +11,7 @@ from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
+from .parallel import pmap
 from .refit import _effect_values, guarded_refit, paired_t, rmse
 from .stages import Candidate, Rung, Setup, screen_on
 
@@ -95,20 +96,23 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
         prev_m, prev_th = models[ladder[-1].model]
         prev_c = cast(ComposedModel, prev_m)  # every rung above the base is a refitted composed model
         order = effect_order(prev_m)  # the rung's effects as its model applies them (innermost first)
-        trial_s = []
         screened: dict = {}  # effect -> (model, θ, residual) of a screen that was itself a joint refit
-        for nm in s.names:
-            if nm in chosen:
-                continue
+
+        def screen(own: Setup, nm: str):
             try:
-                compose(s.base_model, order + [nm], s.cfg)
-                r_s, vals, full_s = screen_on(s, prev_m, prev_th, order, nm, carry.get(nm))
+                compose(own.base_model, order + [nm], own.cfg)
+                r_s, vals, full_s = screen_on(own, prev_m, prev_th, order, nm, carry.get(nm))
             except (EffectError, FitError):
-                continue
-            trial_s.append((r_s, nm, vals))
-            if full_s is not None:
-                screened[nm] = full_s
-            s.say(f"screen {prev_m.name}+{nm}: validation RMSE {fmt_len(r_s)}", step=False)
+                return None
+            own.say(f"screen {prev_m.name}+{nm}: validation RMSE {fmt_len(r_s)}", step=False)
+            return r_s, nm, vals, full_s
+
+        trial_s = []
+        for res in pmap(s, screen, [nm for nm in s.names if nm not in chosen]):
+            if res is not None:
+                trial_s.append(res[:3])
+                if res[3] is not None:
+                    screened[res[1]] = res[3]
         trial_s.sort(key=lambda x: x[0])
         # The screen holds the rung fixed and can undersell an effect only a joint refit shows (creep on top of
         # a delay: 63 nm screened, 2 nm refitted): the strongest residual signature beyond the top screened ones
@@ -117,16 +121,15 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
         strong = [x for x in trial_s[s.full_rate_top:] if cands[x[1]].score >= STRONG_SIGNATURE]
         if strong:
             top.append(max(strong, key=lambda x: cands[x[1]].score))
-        trial = []
-        for r_s, nm, vals in top:
-            if not np.isfinite(r_s):
-                continue
+
+        def refit_on(own: Setup, item: tuple):
+            r_s, nm, vals = item
             options = []  # (model, θ, residual)
             try:
-                mm, tth, yh = guarded_refit(s.base_model, order + [nm], s.cfg, t, u, y, val,
+                mm, tth, yh = guarded_refit(own.base_model, order + [nm], own.cfg, t, u, y, val,
                                             {**prev_m.unpack(prev_th), **vals},
                                             theta_base=prev_c.split(prev_th)[0],
-                                            carry=_effect_values(prev_m, prev_th), fitter=s.fit, prior=vals)
+                                            carry=_effect_values(prev_m, prev_th), fitter=own.fit, prior=vals)
                 options.append((mm, tth, y - yh))
             except (EffectError, FitError):
                 pass
@@ -136,10 +139,12 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
             if nm in screened:
                 options.append(screened[nm])
             if not options:
-                continue
+                return None
             mm, tth, e = min(options, key=lambda o: rmse(o[2][val]))  # the refit on a tie
-            trial.append((rmse(e[val]), nm, mm, tth, e))
-            s.say(f"refit {mm.name}: validation RMSE {fmt_len(trial[-1][0])}")
+            own.say(f"refit {mm.name}: validation RMSE {fmt_len(rmse(e[val]))}")
+            return rmse(e[val]), nm, mm, tth, e
+
+        trial = [x for x in pmap(s, refit_on, [x for x in top if np.isfinite(x[0])]) if x is not None]
         if not trial:
             break
         _other_order(s, trial, prev_m)
@@ -185,27 +190,30 @@ def _other_order(s: Setup, trial: list, prev_m: Model) -> None:
     order = effect_order(prev_m)
     if not order:
         return
-    for i in sorted(range(len(trial)), key=lambda k: trial[k][0])[:OTHER_ORDER_TOP]:
+
+    def other(own: Setup, i: int):
         r, nm, mm, tth, e = trial[i]
         try:
-            other = compose(s.base_model, [nm] + order, s.cfg)
+            m2 = compose(own.base_model, [nm] + order, own.cfg)
         except EffectError:
-            continue
-        if all(getattr(x, "linear", False) for x in other.effects):
-            continue
+            return None
+        if all(getattr(x, "linear", False) for x in m2.effects):
+            return None
         try:
             # from the refit's own point, the effect moved inward
             mc = cast(ComposedModel, mm)
-            m2, th2, yh2 = guarded_refit(s.base_model, [nm] + order, s.cfg, t, u, y, val, mc.unpack(tth),
+            m2, th2, yh2 = guarded_refit(own.base_model, [nm] + order, own.cfg, t, u, y, val, mc.unpack(tth),
                                          theta_base=mc.split(tth)[0], carry=_effect_values(mm, tth),
-                                         fitter=s.fit)
+                                         fitter=own.fit)
         except (EffectError, FitError):
-            continue
-        e2 = y - yh2
-        r2 = rmse(e2[val])
-        s.say(f"refit {m2.name}: validation RMSE {fmt_len(r2)}")
-        if r2 < r:
-            trial[i] = (r2, nm, m2, th2, e2)
+            return None
+        own.say(f"refit {m2.name}: validation RMSE {fmt_len(rmse((y - yh2)[val]))}")
+        return m2, th2, y - yh2
+
+    best = sorted(range(len(trial)), key=lambda k: trial[k][0])[:OTHER_ORDER_TOP]
+    for i, res in zip(best, pmap(s, other, best)):
+        if res is not None and rmse(res[2][val]) < trial[i][0]:
+            trial[i] = (rmse(res[2][val]), trial[i][1], *res)
 
 
 def _on_top(s: Setup, c: Candidate, chosen: list, cur_e: np.ndarray, cur_val: float, trial: tuple,

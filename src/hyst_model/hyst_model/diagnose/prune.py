@@ -20,6 +20,7 @@ from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
 from .ladder import effect_order
+from .parallel import pmap
 from .refit import _simulate, guarded_refit, paired_t, rmse
 from .stages import Rung, Setup
 
@@ -44,24 +45,27 @@ def prune(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], c
     while len(kept) >= 2:
         full_c = cast(ComposedModel, m_full)
         values = full_c.unpack(th_full)
-        trials = []
         applied = effect_order(m_full)  # refits keep the order the model applies its effects in
-        for nm in kept:
+
+        def without(own: Setup, nm: str):
             rest = [k for k in applied if k != nm]
             start = {k: v for k, v in values.items() if not k.startswith(nm + ".")}  # the final point without nm
             try:
-                mm, th, yh = guarded_refit(s.base_model, rest, s.cfg, t, u, y, val, start,
+                mm, th, yh = guarded_refit(own.base_model, rest, own.cfg, t, u, y, val, start,
                                            theta_base=full_c.split(th_full)[0],
                                            carry={k: v for k, v in start.items() if "." in k},
-                                           fitter=s.fit, two_stage=False)
+                                           fitter=own.fit, two_stage=False)
             except (EffectError, FitError):
-                continue
+                return None
             e = y - yh
             r = rmse(e[val])
             t_stat = paired_t(e[val], e_full[val])
-            s.say(f"prune {m_full.name} - {nm}: validation RMSE {fmt_len(r)} (paired t {t_stat:.1f})", step=False)
-            if r_full > 0 and (r / r_full < s.min_factor or t_stat < s.t_min):
-                trials.append((r, nm, mm, th, e, t_stat))
+            own.say(f"prune {m_full.name} - {nm}: validation RMSE {fmt_len(r)} (paired t {t_stat:.1f})",
+                    step=False)
+            return r, nm, mm, th, e, t_stat
+
+        trials = [x for x in pmap(s, without, kept) if x is not None
+                  and r_full > 0 and (x[0] / r_full < s.min_factor or x[5] < s.t_min)]
         if not trials:
             break
         r, nm, mm, th, e, t_stat = min(trials, key=lambda x: x[0])

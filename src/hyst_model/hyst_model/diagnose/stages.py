@@ -19,6 +19,7 @@ from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from ..model import Model
 from .refit import Fixed, _Progress, _effect_values, _simulate, guarded_refit, paired_t, refit, rmse
+from .parallel import pmap
 from .unexplained import Unexplained, explain_unexplained
 
 __all__ = ["Candidate", "Rung", "Setup", "screen_on", "screen_all", "refit_all", "rebase", "verdict"]
@@ -97,6 +98,8 @@ class Setup:
     noise_margin: float
     full_rate_top: int
     max_rungs: int
+    #: Threads for the candidates' fits (:func:`~.parallel.pmap`); the result does not depend on it.
+    jobs: int = 1
 
     @property
     def train(self) -> np.ndarray:
@@ -144,48 +147,59 @@ def screen_all(s: Setup) -> tuple[dict, dict, dict]:
     """Stage 1: each candidate alone on top of the fitted base, in each of its variants (the better kept).
 
     Returns ``(candidates, carry, full)``: Candidate by name; each one's fitted effect values (the point its
-    refit starts from); and (model, θ, residual) of candidates whose screen already was a joint refit.
+    refit starts from); and (model, θ, residual) of candidates whose screen already was a joint refit. The
+    candidates are screened side by side (:func:`~.parallel.pmap`); ``s.cfg`` takes each one's kept variant.
     """
     cands: dict[str, Candidate] = {}
     carry: dict[str, dict] = {}
     full: dict[str, tuple] = {}
-    base_val = s.base_val
-    for nm in s.names:
-        tc = time.perf_counter()
-        probe = compose(s.base_model, [nm], s.cfg)
-        try:
-            score, ev = probe.effects[-1].signature(s.t, s.u, s.e_base, s.dt)
-            score = float(np.clip(score, 0.0, 1.0))
-        except Exception as err:  # noqa: BLE001 - a user effect's test must not sink the diagnosis
-            score, ev = 0.0, f"its residual test failed ({type(err).__name__}: {err})"
-        variants = list(getattr(EFFECTS[nm], "variants", lambda: [{}])()) or [{}]
-        variants = [v for v in variants if not any(k in s.fixed and s.fixed[k] != x for k, x in v.items())] or [{}]
-        tried: list[tuple[float, dict, dict, tuple | None]] = []
-        errors = []
-        for var in variants:  # e.g. dynamics in both structures: keep whichever validates better
-            s.cfg.update(var)  # an effect reads only its own "<name>.*" keys, so the shared config can carry it
-            try:
-                r_v, vals_v, done_v = screen_on(s, s.base_model, s.th_base, [], nm, None)
-                tried.append((r_v, var, vals_v, done_v))
-            except (FitError, EffectError) as err:
-                errors.append(str(err))
-        if tried:
-            r, var, vals, done = min(tried, key=lambda x: x[0])
+    for nm, cand, vals, done, var in pmap(s, _screen_one, s.names):
+        cands[nm] = cand
+        if vals is not None:
             s.cfg.update(var)
             carry[nm] = vals
-            if done is not None:
-                full[nm] = done
-            if len(tried) > 1:
-                ev += ("; tried " + " and ".join(f"{_label(vv)} ({fmt_len(rv)} on validation)"
-                                                 for rv, vv, _, _ in tried) + f": kept {_label(var)}")
-        else:
-            r = math.inf
-            ev = f"{ev}; the fit failed: {'; '.join(errors)}"
-        cands[nm] = Candidate(nm, r, math.nan, base_val / r if r > 0 else math.inf, False, score, ev,
-                              params=carry.get(nm, {}))
-        s.say(f"screen {s.base}+{nm}: validation RMSE {fmt_len(r)} ({base_val / r:.2f}×), residual test "
-              f"{score:.2f}, {time.perf_counter() - tc:.1f} s")
+        if done is not None:
+            full[nm] = done
     return cands, carry, full
+
+
+def _screen_one(s: Setup, nm: str) -> tuple[str, Candidate, dict | None, tuple | None, dict]:
+    """One candidate of :func:`screen_all` (on its own copy of the configuration): (name, candidate, effect
+    values or None if every variant failed, the joint refit if the screen was one, the variant kept)."""
+    tc = time.perf_counter()
+    base_val = s.base_val
+    probe = compose(s.base_model, [nm], s.cfg)
+    try:
+        score, ev = probe.effects[-1].signature(s.t, s.u, s.e_base, s.dt)
+        score = float(np.clip(score, 0.0, 1.0))
+    except Exception as err:  # noqa: BLE001 - a user effect's test must not sink the diagnosis
+        score, ev = 0.0, f"its residual test failed ({type(err).__name__}: {err})"
+    variants = list(getattr(EFFECTS[nm], "variants", lambda: [{}])()) or [{}]
+    variants = [v for v in variants if not any(k in s.fixed and s.fixed[k] != x for k, x in v.items())] or [{}]
+    tried: list[tuple[float, dict, dict, tuple | None]] = []
+    errors = []
+    for v in variants:  # e.g. dynamics in both structures: keep whichever validates better
+        s.cfg.update(v)  # an effect reads only its own "<name>.*" keys (this task's copy of the configuration)
+        try:
+            r_v, vals_v, done_v = screen_on(s, s.base_model, s.th_base, [], nm, None)
+            tried.append((r_v, v, vals_v, done_v))
+        except (FitError, EffectError) as err:
+            errors.append(str(err))
+    vals: dict | None = None
+    done: tuple | None = None
+    var: dict = {}
+    if tried:
+        r, var, vals, done = min(tried, key=lambda x: x[0])
+        if len(tried) > 1:
+            ev += ("; tried " + " and ".join(f"{_label(vv)} ({fmt_len(rv)} on validation)"
+                                             for rv, vv, _, _ in tried) + f": kept {_label(var)}")
+    else:
+        r = math.inf
+        ev = f"{ev}; the fit failed: {'; '.join(errors)}"
+    cand = Candidate(nm, r, math.nan, base_val / r if r > 0 else math.inf, False, score, ev, params=vals or {})
+    s.say(f"screen {s.base}+{nm}: validation RMSE {fmt_len(r)} ({base_val / r:.2f}×), residual test "
+          f"{score:.2f}, {time.perf_counter() - tc:.1f} s")
+    return nm, cand, vals, done, var
 
 
 def refit_all(s: Setup, cands: dict, carry: dict, full: dict) -> list:
@@ -223,22 +237,27 @@ def refit_all(s: Setup, cands: dict, carry: dict, full: dict) -> list:
 
 def _refit_each(s: Setup, cands: dict, carry: dict, full: dict) -> None:
     """Refit every screened candidate not yet refitted jointly with the base, from its screened point."""
-    t, u, y, val = s.t, s.u, s.y, s.val
     order = sorted(cands.values(), key=lambda c: c.rmse)
-    for c in order:
-        if c.effect in full or not np.isfinite(c.rmse):
-            continue
-        try:
-            m, th, yh = guarded_refit(s.base_model, [c.effect], s.cfg, t, u, y, val,
-                                      {**s.base_model.unpack(s.th_base), **carry.get(c.effect, {})},
-                                      theta_base=s.th_base, fitter=s.fit, prior=carry.get(c.effect))
-        except (FitError, EffectError):
-            continue
-        full[c.effect] = (m, th, y - yh)
-        s.say(f"refit {m.name}: validation RMSE {fmt_len(rmse((y - yh)[val]))}")
+    todo = [c.effect for c in order if c.effect not in full and np.isfinite(c.rmse)]
+    for nm, res in zip(todo, pmap(s, lambda own, nm: _refit_one(own, nm, carry.get(nm)), todo)):
+        if res is not None:
+            full[nm] = res
     for c in order:
         if c.effect not in full:
             c.evidence += " (screened with the base model held fixed: its joint refit failed)"
+
+
+def _refit_one(s: Setup, nm: str, vals: dict | None) -> tuple | None:
+    """Effect ``nm`` refitted jointly with the base from its screened values: (model, θ, residual) or None."""
+    t, u, y, val = s.t, s.u, s.y, s.val
+    try:
+        m, th, yh = guarded_refit(s.base_model, [nm], s.cfg, t, u, y, val,
+                                  {**s.base_model.unpack(s.th_base), **(vals or {})},
+                                  theta_base=s.th_base, fitter=s.fit, prior=vals)
+    except (FitError, EffectError):
+        return None
+    s.say(f"refit {m.name}: validation RMSE {fmt_len(rmse((y - yh)[val]))}")
+    return m, th, y - yh
 
 
 def _rescreen(s: Setup, cands: dict, carry: dict, full: dict) -> None:

@@ -31,7 +31,7 @@ PER_DECADE = 3
 TAUS = np.logspace(-2, np.log10(300.0), int(round(PER_DECADE * np.log10(300.0 / 0.01))) + 1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _lag_bank(x: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Σ_i w_i c_i for lags c_i ← a_i c_i + (1 − a_i) x_k, all at rest at x[0] (one pass, compiled)."""
     n = x.shape[0]
@@ -48,7 +48,7 @@ def _lag_bank(x: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _lag_bank_cols(X: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
     """:func:`_lag_bank` of every column of ``X`` (n, k) in one pass (the columns vectorise)."""
     n, k = X.shape

@@ -54,7 +54,7 @@ def zoh_matrices(fn: float, zeta: float, dt: float, lag: float = 0.0
     return E[:2, :2].copy(), g, gb
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _series_run(phi: np.ndarray, g1: np.ndarray, g2: np.ndarray, x: np.ndarray) -> np.ndarray:
     n = x.size
     y = np.empty(n)
@@ -92,7 +92,7 @@ def series_filter(x: np.ndarray, fn: float, zeta: float, dt: float, hold: str = 
 
 
 # ---------------------------------------------------------------------------------------------- feedback
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _rhs(p: np.ndarray, uu: float, y: float, v: float, w: float) -> tuple[float, float, float]:
     wn = 2.0 * np.pi * p[0]
     acc = wn * wn * (p[2] * uu - (1.0 - p[3]) * y - w) - 2.0 * p[1] * wn * v
@@ -100,7 +100,7 @@ def _rhs(p: np.ndarray, uu: float, y: float, v: float, w: float) -> tuple[float,
     return v, acc, dw
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def msd_bw_simulate(p: np.ndarray, ufine: np.ndarray, substeps: int, dt: float,
                     y0: float = 0.0, v0: float = 0.0, w0: float = 0.0) -> np.ndarray:
     """Integrate the mass-spring-damper with Bouc-Wen restoring force (RK4, ``substeps`` per sample).

@@ -47,7 +47,7 @@ DELTA2_GRID = 1.0 - np.array([0.0, 1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 0.01, 0.0
                               0.15, 0.2, 0.3, 0.5])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ee_normal(Y0, Y1, u0, u1, c, d2, ys, rate):
     """Normal equations of the equation-error regression (3.21) for one (δ2, offset), without forming X."""
     p = 7 if rate else 4

@@ -27,7 +27,7 @@ class LMResult:
     message: str
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _normal_equations(J: np.ndarray, r: np.ndarray):
     """JᵀJ, Jᵀr and rᵀr in one pass, single-threaded (OpenBLAS's threaded gemv/ddot stall on a loaded machine)."""
     n, p = J.shape
@@ -48,7 +48,7 @@ def _normal_equations(J: np.ndarray, r: np.ndarray):
     return H, g, rr
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def sum_squares(r: np.ndarray) -> float:
     """rᵀr summed in order, as :func:`_normal_equations` sums it (a trial's cost compares with an accepted one's)."""
     rr = 0.0

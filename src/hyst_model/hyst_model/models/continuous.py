@@ -25,7 +25,7 @@ from numba import njit
 __all__ = ["backlash_like", "dahl", "bw_special", "bw_general", "bw_bound"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _lin_exact(y0: float, du: float, lam: float, a0: float, a1: float, u0: float) -> float:
     """Solve dy/du = a0 + a1 u − lam·y over [u0, u0 + du] exactly (lam may be 0)."""
     if abs(lam) < 1e-300:
@@ -37,7 +37,7 @@ def _lin_exact(y0: float, du: float, lam: float, a0: float, a1: float, u0: float
     return A + B * (u0 + du) + (y0 - A - B * u0) * e
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def backlash_like(a: float, b: float, c: float, u: np.ndarray, y0: float = 0.0) -> np.ndarray:
     """Backlash-like model (3.1) for a piecewise-linear input; exact per interval ((3.2)–(3.3)).
 
@@ -56,7 +56,7 @@ def backlash_like(a: float, b: float, c: float, u: np.ndarray, y0: float = 0.0) 
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dahl(alpha: float, beta: float, u: np.ndarray, y0: float = 0.0) -> np.ndarray:
     """Dahl model (3.6), r = 1, for a piecewise-linear input; exact per interval (3.7)."""
     n = u.shape[0]
@@ -72,7 +72,7 @@ def dahl(alpha: float, beta: float, u: np.ndarray, y0: float = 0.0) -> np.ndarra
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bw_interval(xi: float, phi: float, gamma: float, y0: float, u0: float, du: float) -> float:
     """Exact (3.9) over one linear input interval, splitting where y changes sign."""
     s = 1.0 if du > 0 else -1.0
@@ -100,7 +100,7 @@ def _bw_interval(xi: float, phi: float, gamma: float, y0: float, u0: float, du: 
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def bw_special(xi: float, phi: float, gamma: float, u: np.ndarray, y0: float = 0.0) -> np.ndarray:
     """Special-case Bouc-Wen (3.9) for a piecewise-linear input, exact per interval."""
     n = u.shape[0]
@@ -115,13 +115,13 @@ def bw_special(xi: float, phi: float, gamma: float, u: np.ndarray, y0: float = 0
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bw_w_rhs(xi: float, phi: float, gamma: float, nexp: float, s: float, w: float) -> float:
     aw = abs(w)
     return xi - phi * s * aw ** (nexp - 1.0) * w - gamma * aw ** nexp
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bw_general_w(xi, phi, gamma, nexp, u, w0, substeps):
     n = u.shape[0]
     w = np.empty(n)

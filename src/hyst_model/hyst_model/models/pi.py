@@ -25,7 +25,7 @@ from ..model import Model, Param
 __all__ = ["play_operators", "pi_simulate", "pi_inverse", "PIModel"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def play_operators(u: np.ndarray, r: np.ndarray, z0: np.ndarray) -> np.ndarray:
     """Outputs of the play operators F_{r_j}[u] (2.11), shape (n, M), starting from states ``z0``."""
     n = u.shape[0]
