@@ -147,7 +147,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
         trial = [x for x in pmap(s, refit_on, [x for x in top if np.isfinite(x[0])]) if x is not None]
         if not trial:
             break
-        _other_order(s, trial, prev_m)
+        _other_order(s, trial, prev_m, cur_val)
         good = [x for x in trial if cur_val / x[0] >= s.min_factor and paired_t(cur_e[val], x[4][val]) >= s.t_min]
         pick, why = prefer_simpler(s, [(x[1], x[0], x[4], cands[x[1]].score) for x in good]) if good else (-1, "")
         # Every candidate refitted on top of this rung now stands for what it adds to it (the ranking of those
@@ -177,8 +177,10 @@ def effect_order(m: Model) -> list[str]:
     return [e.name for e in m.effects] if isinstance(m, ComposedModel) else []
 
 
-def _other_order(s: Setup, trial: list, prev_m: Model) -> None:
-    """Try the best :data:`OTHER_ORDER_TOP` refits of a rung with the new effect innermost, keeping the better order.
+def _other_order(s: Setup, trial: list, prev_m: Model, cur_val: float) -> None:
+    """Try the best :data:`OTHER_ORDER_TOP` refits of a rung with the new effect innermost, keeping the better order;
+    only refits the rung could take (they cut its validation RMSE ``cur_val`` by ``min_factor``): the order is a
+    refinement of an effect the record already shows, not a second search.
 
     The ladder adds each effect outside the rung's, but effects that do not commute — a nonlinear map and a
     dynamic one (the stage's bow before its creep, a saturation before a mode) — are not the same model in the
@@ -210,7 +212,8 @@ def _other_order(s: Setup, trial: list, prev_m: Model) -> None:
         own.say(f"refit {m2.name}: validation RMSE {fmt_len(rmse((y - yh2)[val]))}")
         return m2, th2, y - yh2
 
-    best = sorted(range(len(trial)), key=lambda k: trial[k][0])[:OTHER_ORDER_TOP]
+    best = [k for k in sorted(range(len(trial)), key=lambda k: trial[k][0])[:OTHER_ORDER_TOP]
+            if cur_val / trial[k][0] >= s.min_factor]
     for i, res in zip(best, pmap(s, other, best)):
         if res is not None and rmse(res[2][val]) < trial[i][0]:
             trial[i] = (rmse(res[2][val]), trial[i][1], *res)

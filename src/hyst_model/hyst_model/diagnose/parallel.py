@@ -45,9 +45,12 @@ class _Lines:
         self.lines.append((msg, kw))
 
 
-def pmap(s: Setup, fn: Callable[[Setup, Any], T], items: Iterable[Any]) -> list[T]:
+def pmap(s: Setup, fn: Callable[[Setup, Any], T], items: Iterable[Any],
+         cost: Callable[[Any], float] | None = None) -> list[T]:
     """``[fn(own, item) for item in items]``, where ``own`` is ``s`` with its own configuration and progress.
 
+    ``cost(item)``: an estimate of a task's time; on several threads the costliest start first (a long task
+    started last kept one thread busy alone). Only the order of work changes, never the result or the lines.
     An exception of a task is raised where the sequential loop would have raised it (after the lines of the
     tasks before it); tasks already started finish first.
     """
@@ -68,8 +71,13 @@ def pmap(s: Setup, fn: Callable[[Setup, Any], T], items: Iterable[Any]) -> list[
             flush(lines)
             out.append(res)
         return out
+    start = list(range(len(items)))
+    if cost is not None:
+        c = [cost(it) for it in items]
+        start.sort(key=lambda i: -c[i])
     with ThreadPoolExecutor(max_workers=min(s.jobs, len(items))) as ex:
-        futures = [ex.submit(run, it) for it in items]
+        submitted = {i: ex.submit(run, items[i]) for i in start}
+        futures = [submitted[i] for i in range(len(items))]
         for f in futures:
             res, lines = f.result()
             flush(lines)
