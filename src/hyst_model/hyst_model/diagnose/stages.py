@@ -22,7 +22,8 @@ from .refit import Fixed, _Progress, _effect_values, _simulate, guarded_refit, p
 from .parallel import pmap
 from .unexplained import Unexplained, explain_unexplained
 
-__all__ = ["Candidate", "Rung", "Setup", "screen_on", "screen_all", "refit_all", "rebase", "verdict"]
+__all__ = ["Candidate", "Rung", "Setup", "screen_on", "screen_all", "refit_all", "rebase", "verdict",
+           "effect_variants", "own_config"]
 
 
 @dataclass
@@ -154,11 +155,7 @@ def screen_all(s: Setup) -> tuple[dict, dict, dict]:
     cands: dict[str, Candidate] = {}
     carry: dict[str, dict] = {}
     full: dict[str, tuple] = {}
-    items = []
-    for nm in s.names:
-        variants = list(getattr(EFFECTS[nm], "variants", lambda: [{}])()) or [{}]
-        variants = [v for v in variants if not any(k in s.fixed and s.fixed[k] != x for k, x in v.items())] or [{}]
-        items += [(nm, i, v) for i, v in enumerate(variants)]
+    items = [(nm, i, v) for nm in s.names for i, v in enumerate(effect_variants(s, nm))]
     done_by: dict[str, list] = {}
     for (nm, _, _), res in zip(items, pmap(s, _screen_variant, items, cost=lambda it: _sim_cost(s, it))):
         done_by.setdefault(nm, []).append(res)
@@ -171,6 +168,18 @@ def screen_all(s: Setup) -> tuple[dict, dict, dict]:
         if done is not None:
             full[nm] = done
     return cands, carry, full
+
+
+def effect_variants(s: Setup, nm: str) -> list[dict]:
+    """The configurations effect ``nm`` is tried in (:meth:`Effect.variants`), without those that would change
+    a key the user fixed; ``[{}]`` for an effect with one configuration."""
+    variants = list(getattr(EFFECTS[nm], "variants", lambda: [{}])()) or [{}]
+    return [v for v in variants if not any(k in s.fixed and s.fixed[k] != x for k, x in v.items())] or [{}]
+
+
+def own_config(m: Model, nm: str) -> dict:
+    """The configuration keys of effect ``nm`` in the composed model ``m`` (the variant it was fitted in)."""
+    return {k: v for k, v in m.config().items() if k.startswith(nm + ".")} if hasattr(m, "config") else {}
 
 
 def _sim_cost(s: Setup, item: tuple[str, int, dict]) -> float:
@@ -310,7 +319,7 @@ def _rescreen(s: Setup, cands: dict, carry: dict, full: dict) -> None:
         if new is not None and (old is None or rmse(new[2][val]) < rmse(old[2][val])):
             full[nm], carry[nm] = new, again_carry.get(nm, {})
         elif old is not None:  # the first round's refit stays: so does the configuration it was fitted in
-            s.cfg.update({k: v for k, v in old[0].config().items() if k.startswith(nm + ".")})
+            s.cfg.update(own_config(old[0], nm))
 
 
 #: The base is refitted from the base parameters of at most this many of the best joint refits (:func:`rebase`).
