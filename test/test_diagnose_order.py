@@ -40,3 +40,31 @@ def test_the_order_the_record_supports_is_kept(diagnosis):
     assert d.missing == "creep"
     m, _ = d.models[d.ladder[-1].model]
     assert [e.name for e in m.effects] == d.ladder[-1].effects
+
+
+@pytest.fixture(scope="module")
+def behind_a_delay():
+    from hyst_bringup.loop import SimPlant
+    from hyst_control.excitation import ExcitationSpec, build_excitation
+    from hyst_model.diagnose.diagnose import diagnose
+    from hyst_sim.plant import Plant, PlantConfig
+
+    rate = 2000.0
+    cfg = PlantConfig.for_profile("pea", rate=rate, seed=11)
+    eff = cfg.effects
+    eff = eff.with_effects(asymmetry=replace(eff.asymmetry, strength=0.03), delay=replace(eff.delay, strength=6))
+    plant = SimPlant(Plant(replace(cfg, effects=eff)))
+    ex = build_excitation(ExcitationSpec(v_min=0.0, v_max=150.0, dt=1.0 / rate, seed=11))
+    plant.reset(float(ex.u[0]))
+    y = np.array([plant.step(float(v)) for v in ex.u])
+    return diagnose(ex.t, ex.u, y, effects=["delay", "asymmetry"])
+
+
+def test_an_effects_configuration_is_chosen_again_on_the_rung(behind_a_delay):
+    """The stage's bow is quadratic; with a 6-sample delay dominating the base's residual the gain kink screened
+    better on the bare base, and the ladder then only had the kink on top of the delay (12x the noise left)."""
+    d = behind_a_delay
+    assert set(d.ladder[-1].effects) == {"delay", "asymmetry"}, d.explanation
+    m, _ = d.models[d.ladder[-1].model]
+    assert m.config().get("asymmetry.form") == "quadratic", m.config()
+    assert d.ladder[-1].rmse < 1.5 * d.noise, (d.ladder[-1].rmse, d.noise)
