@@ -11,22 +11,27 @@ import numpy as np
 import pytest
 
 
-@pytest.fixture(scope="module")
-def diagnosis():
+def _diagnose_sim_stage(seed: int, effects: list[str], **strengths):
+    """Diagnose (``effects`` only) an identification record of the simulated PEA stage with hidden ``strengths``."""
     from hyst_bringup.loop import SimPlant
     from hyst_control.excitation import ExcitationSpec, build_excitation
     from hyst_model.diagnose.diagnose import diagnose
     from hyst_sim.plant import Plant, PlantConfig
 
     rate = 2000.0
-    cfg = PlantConfig.for_profile("pea", rate=rate, seed=7)
+    cfg = PlantConfig.for_profile("pea", rate=rate, seed=seed)
     eff = cfg.effects
-    eff = eff.with_effects(asymmetry=replace(eff.asymmetry, strength=0.07), creep=replace(eff.creep, strength=0.04))
+    eff = eff.with_effects(**{k: replace(getattr(eff, k), strength=v) for k, v in strengths.items()})
     plant = SimPlant(Plant(replace(cfg, effects=eff)))
-    ex = build_excitation(ExcitationSpec(v_min=0.0, v_max=150.0, dt=1.0 / rate, seed=7))
+    ex = build_excitation(ExcitationSpec(v_min=0.0, v_max=150.0, dt=1.0 / rate, seed=seed))
     plant.reset(float(ex.u[0]))
     y = np.array([plant.step(float(v)) for v in ex.u])
-    return diagnose(ex.t, ex.u, y, effects=["creep", "asymmetry"])
+    return diagnose(ex.t, ex.u, y, effects=effects)
+
+
+@pytest.fixture(scope="module")
+def diagnosis():
+    return _diagnose_sim_stage(7, ["creep", "asymmetry"], asymmetry=0.07, creep=0.04)
 
 
 def test_the_order_the_record_supports_is_kept(diagnosis):
@@ -44,20 +49,7 @@ def test_the_order_the_record_supports_is_kept(diagnosis):
 
 @pytest.fixture(scope="module")
 def behind_a_delay():
-    from hyst_bringup.loop import SimPlant
-    from hyst_control.excitation import ExcitationSpec, build_excitation
-    from hyst_model.diagnose.diagnose import diagnose
-    from hyst_sim.plant import Plant, PlantConfig
-
-    rate = 2000.0
-    cfg = PlantConfig.for_profile("pea", rate=rate, seed=11)
-    eff = cfg.effects
-    eff = eff.with_effects(asymmetry=replace(eff.asymmetry, strength=0.03), delay=replace(eff.delay, strength=6))
-    plant = SimPlant(Plant(replace(cfg, effects=eff)))
-    ex = build_excitation(ExcitationSpec(v_min=0.0, v_max=150.0, dt=1.0 / rate, seed=11))
-    plant.reset(float(ex.u[0]))
-    y = np.array([plant.step(float(v)) for v in ex.u])
-    return diagnose(ex.t, ex.u, y, effects=["delay", "asymmetry"])
+    return _diagnose_sim_stage(11, ["delay", "asymmetry"], asymmetry=0.03, delay=6)
 
 
 def test_an_effects_configuration_is_chosen_again_on_the_rung(behind_a_delay):
