@@ -104,6 +104,8 @@ class DeviceLink:
         self._last_err_poll = -math.inf
         self._last_rx = -math.inf
         self._in_timeout = False
+        #: Device time (s) of the newest running-state sample: a silence the host slept through shows as a gap.
+        self._last_dev_t: float | None = None
         self._hs_deadline = 0.0
         self._hs_tries = 0
         self._seeded = False
@@ -218,6 +220,7 @@ class DeviceLink:
             self.adapter.reset()
             self.device_clock.reset()
             h.state, h.identity, self._seeded, self._hs_tries, self._seed = "handshake", "", False, 0, None
+            self._last_dev_t = None
             self._send_handshake(now)
         data = self.transport.read()
         for ev in self.adapter.feed(data) if data else ():
@@ -246,6 +249,14 @@ class DeviceLink:
     def _event(self, ev, now: float, out: list) -> None:
         h = self.health
         if isinstance(ev, Reading):
+            if h.state == "running" and ev.device_time is not None:
+                # A device silence longer than sample_timeout is a timeout even when this host was stalled through
+                # all of it (the samples after it then arrive at once and the arrival clock never saw a gap);
+                # the device's own clock shows it. Gaps < 0 (clock wrap) or seen live already are not counted.
+                gap = None if self._last_dev_t is None else ev.device_time - self._last_dev_t
+                if gap is not None and gap > self.sample_timeout and not self._in_timeout:
+                    h.timeouts += 1
+                self._last_dev_t = ev.device_time
             self._last_rx, self._in_timeout = now, False
             h.applied_v = ev.applied_v
             if h.state == "handshake" and not self._seeded:
