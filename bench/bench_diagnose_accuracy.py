@@ -31,9 +31,12 @@ def _rmse(e) -> float:
     return float(np.sqrt(np.mean(np.square(e))))
 
 
-def run_case(args: tuple[int, str | None]) -> dict:
-    """Diagnose one generated case and measure the error fall on its fresh record (pure; runs in a worker)."""
-    seed, kind = args
+def run_case(args: tuple) -> dict:
+    """Diagnose one generated case and measure the error fall on its fresh record (pure; runs in a worker).
+
+    ``args``: ``(seed, kind)`` or ``(seed, kind, diagnose_kwargs)`` (e.g. ``{"min_factor": 1.05}``)."""
+    seed, kind = args[:2]
+    kwargs = dict(args[2]) if len(args) > 2 else {}
     from hyst_model.diagnose.diagnose import diagnose, refit, validation_mask
     from hyst_sim.generator import generate_case
 
@@ -42,7 +45,7 @@ def run_case(args: tuple[int, str | None]) -> dict:
     out = {"case": c.name, "kind": c.kind, "expected": list(c.expected), "sizes": c.size_over_noise,
            "noise": c.noise}
     try:
-        d = diagnose(c.t, c.u, c.y)
+        d = diagnose(c.t, c.u, c.y, **kwargs)
     except Exception as err:  # noqa: BLE001 - a failing case is a result, not a crash
         out.update(error=f"{type(err).__name__}: {err}", named=["error"], seconds=time.perf_counter() - t0)
         return out
@@ -145,11 +148,15 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--json", metavar="OUT", help="write per-case results")
     ap.add_argument("--kinds", default=None,
                     help="only these kinds, comma-separated (e.g. pair): the same cases as in the full family")
+    ap.add_argument("--min-factor", type=float, default=None,
+                    help="diagnose's min_factor (default: diagnose's own), for a sensitivity study")
+    ap.add_argument("--noise-margin", type=float, default=None, help="diagnose's noise_margin, likewise")
     a = ap.parse_args(["--n", "24"] if argv is None else argv)
+    kw = {k: v for k, v in (("min_factor", a.min_factor), ("noise_margin", a.noise_margin)) if v is not None}
     from hyst_sim.generator.cases import KINDS  # noqa: F401 - fail early if the generator is missing
     weights = {"single_large": 4, "single_small": 2, "pair": 2, "outside": 1, "none": 2, "pi_truth": 1}
     order = [k for k, w in weights.items() for _ in range(w)]
-    jobs = [(a.seed * 100000 + i, order[i % len(order)]) for i in range(a.n)]
+    jobs = [(a.seed * 100000 + i, order[i % len(order)], kw) for i in range(a.n)]
     if a.kinds:
         wanted = set(a.kinds.split(","))
         if not wanted <= set(weights):

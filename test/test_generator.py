@@ -37,6 +37,14 @@ def test_cases_are_labelled_sized_and_within_limits(seed):
         assert c.expected == ("unexplained",)
 
 
+@pytest.mark.parametrize("seed, kind", [(500048, "single_large"), (100017, "single_small"), (500126, "pair")])
+def test_a_gain_kink_lies_within_the_recorded_stroke(seed, kind):
+    """These cases once drew the kink above the stroke their record covers: labelled with an effect of size 0."""
+    c = generate_case(seed, kind)
+    (i,) = [k for k, (f, _) in enumerate(c.forms) if f == "asym_kink"]
+    assert c.size_over_noise[i] >= (2.9 if kind == "single_small" else 4.9), (c.name, c.size_over_noise)
+
+
 def test_family_is_balanced_over_kinds():
     fam = case_family(24, seed=3)
     kinds = {c.kind for c in fam}
