@@ -148,7 +148,11 @@ class Compensation:
         for i in range(n - 1, -1, -1):
             e = self.used[i]
             # a Smith predictor: the measurement minus the model through it plus the model inside it
-            y = y - pred[i] + (pred[i - 1] if i else x_hat) if e.smith else e.measure(y, u)
+            if e.smith:
+                e.mismatch(y - pred[i])
+                y = y - pred[i] + (pred[i - 1] if i else x_hat)
+            else:
+                y = e.measure(y, u)
         if sensor:
             for e in self.used:
                 e.observe(y, u)

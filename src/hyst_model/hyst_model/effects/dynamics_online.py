@@ -1,12 +1,18 @@
 """The series resonance's per-sample inverse for the controllers (:meth:`.dynamics.DynamicsEffect.online`)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .dynamics_kernels import zoh_matrices
 from .online import OnlineEffect
 
-__all__ = ["SeriesResonanceInverse"]
+__all__ = ["SeriesResonanceInverse", "MISMATCH_TAU"]
+
+#: Time constant (s) of the slow measured mismatch that drives the inverse's state (the drift observer's 0.05 s):
+#: well below the loop's disturbances, 20 periods of a 400 Hz mode (its fast mismatch stays out of the target).
+MISMATCH_TAU = 0.05
 
 
 class SeriesResonanceInverse(OnlineEffect):
@@ -29,6 +35,14 @@ class SeriesResonanceInverse(OnlineEffect):
     ``delay`` (whole samples) reads the mode that many samples late: the reference is previewed by it and the
     predictor compares the measurement with the reading ``delay`` samples old. A lag of one sample is exactly that
     (:meth:`DynamicsEffect.online` uses it: the reading then has no feed-through of x_k, so no inverse of its own).
+
+    The state the target reads is driven by the prediction *plus the slow measured mismatch* m (the reading minus
+    the model's, low-passed with :data:`MISMATCH_TAU`; closed loop only, :meth:`observe`). Driven by the prediction
+    alone it undid every correction the law made against an offset the model does not know: the law aims the
+    Smith-corrected value x̂ + d at the target, the inverse then sees x̂ moved by −d and asks for it back, and the
+    stage stays (1 − Γ_0)·d off while the law sees no error (drift + a 391 Hz mode: 8-11x the drift-free level).
+    With m ≈ d the inverse's state follows the mode's input as the stage really has it, and at low frequencies
+    the stage reads the reference. m starts at 0 (bumpless) and stays 0 in open loop (no sensor).
     """
 
     name = "dynamics"
@@ -58,6 +72,9 @@ class SeriesResonanceInverse(OnlineEffect):
         self.preview = delay * dt
         self._read = np.zeros(delay + 1)  # the model's reading, newest first
         self._fs = np.zeros(3)  # the same driven by the predicted measurement (forward: may be delayed)
+        self._m = 0.0  # slow measured mismatch at this effect's output (m), added to what drives _s
+        self._innov = math.nan  # the newest reading minus the model's, until observe() takes it
+        self._g = min(1.0, dt / MISMATCH_TAU)
 
     def reset(self, y, u):
         self.start(self._pred.reset(u), u)
@@ -65,18 +82,29 @@ class SeriesResonanceInverse(OnlineEffect):
     def start(self, x, u):
         self._s[:] = self._fs[:] = (x, 0.0, x)
         self._read[:] = x
+        self._m, self._innov = 0.0, math.nan
 
     def forward(self, z, w, u, first):
         p = self._part
+        w = w + self._m  # the mode's input as the stage has it (see the class docstring)
         self._s = self._A @ self._s + self._B * w
         self._fs = self._A @ self._fs + self._B * z
         self._read[1:] = self._read[:-1]
         self._read[0] = (1.0 - p) * z + p * float(self._fs[0])
         return float(self._read[-1]), (1.0 - p) * w + p * float(self._s[0])
 
+    def mismatch(self, e):
+        self._innov = e
+
+    def observe(self, x, u):
+        if math.isfinite(self._innov):  # a bad sample must not poison the state
+            self._m += self._g * (self._innov - self._m)
+
     def measure(self, y, u):
         x_hat = self._pred.step(u)
-        return y - self.forward(x_hat, x_hat, u, True)[0] + x_hat
+        read = self.forward(x_hat, x_hat, u, True)[0]
+        self.mismatch(y - read)
+        return y - read + x_hat
 
     def target(self, r, u):
         return (r - self._part * float((self._A @ self._s)[0])) / self._d

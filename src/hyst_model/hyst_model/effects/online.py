@@ -82,6 +82,10 @@ class OnlineEffect:
         """
         raise NotImplementedError(f"{self.name} has no forward prediction")
 
+    def mismatch(self, e: float) -> None:
+        """Smith predictors: the newest reading minus the model's prediction at this effect's output (m), given
+        before :meth:`observe`; an effect whose inverse's state follows the measured mismatch keeps it."""
+
     def observe(self, x: float, u: float) -> None:
         """After a measurement went through every effect: ``x`` (m) is the base-level value the law will see.
 
