@@ -286,7 +286,8 @@ class _Disturbed:
 
 
 @pytest.mark.parametrize("alg", ["dppc", "dmrac"])
-@pytest.mark.parametrize("case", ["dynamics", "delay+dynamics", "creep", "delay+creep", "asymmetry+dynamics", "creep+dynamics", "delay"])
+@pytest.mark.parametrize("case", ["dynamics", "delay+dynamics", "creep", "delay+creep", "asymmetry+dynamics",
+                                  "creep+dynamics", "delay"])
 def test_a_disturbance_the_model_does_not_know_is_rejected_through_the_compensation(alg, case):
     """A drifting offset on a stage whose effects the compensation inverts: the feedback must remove it. The mode
     inverse's state once ran on the model's prediction alone, so it undid every correction the law made against

@@ -37,7 +37,7 @@ from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 from hyst_model.core import MBWParams
 
 from .base import check_model, hand_over
-from .compensation import effect_parameters
+from .compensation import effect_parameters, plan_compensation
 from .dmrac import TABLE53
 from .errors import ControlError
 from .controllers import ALGORITHMS, make_controller, make_supervised
@@ -186,7 +186,9 @@ class ControllerNode(AtomicParametersNode):
         policy = str(get("stability.policy"))
         if policy not in POLICIES:
             raise ControlError(f"stability.policy must be one of {', '.join(POLICIES)}, got {policy!r}")
-        res = identified_resonance(effects, dict(evals))
+        # checked as the compensation will run it (a mode it inverts is left only as a model error)
+        res = identified_resonance(effects, dict(evals), plan_compensation(model, effects, dict(evals), dict(evals),
+                                                                           1.0 / rate))
         stab = cached_guard(alg, gains.get(alg), model, 1.0 / rate, res, policy, _F(get("stability.gain_margin")),
                       (_F(get("v_min")), _F(get("v_max"))))  # StabilityError (a ControlError) = rejected
         s = ControllerSettings(
