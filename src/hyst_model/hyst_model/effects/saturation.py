@@ -87,7 +87,8 @@ class Saturation(Effect):
         lo, hi = float(np.min(x)), float(np.max(x))
         span = hi - lo
         best = (float(residual @ residual), {})
-        for frac in (0.05, 0.1, 0.2, 0.3, 0.5):
+        shaped = (math.inf, {})  # the knee whose shape the residual shows best, at whatever share of it
+        for frac in (0.02, 0.05, 0.1, 0.2, 0.3, 0.5):
             for wf in (0.05, 0.1, 0.2, 0.4):
                 w = wf * span
                 top, bottom = hi - frac * span + w, lo + frac * span - w
@@ -99,7 +100,14 @@ class Saturation(Effect):
                 cost = float(((residual - d) ** 2).sum())
                 if 0.5 < g < 2.0 and cost < best[0]:
                     best = (cost, {"top": top, "bottom": bottom, "width": w})
-        return best[1]
+                c_shape = float(((residual - g * d) ** 2).sum())
+                if g > 0.0 and c_shape < shaped[0]:
+                    shaped = (c_shape, {"top": top, "bottom": bottom, "width": w})
+        # No knee of the full size: a base that imitated part of the limit leaves only a share of it (generated GMA
+        # stage 1119: psi2 < 0 and alpha2 > 0 bent the base's loop). The default limits, far outside the stroke,
+        # have no gradient and the fit never moved from them (708 nm on both sides of the refit); the knee with
+        # the residual's shape gives the fit a start.
+        return best[1] or shaped[1]
 
     def signature(self, t, u, residual, dt):
         uc = 0.5 * (float(np.min(u)) + float(np.max(u)))
