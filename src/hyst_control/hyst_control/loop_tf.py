@@ -171,23 +171,28 @@ def compensated_char(algorithm: str, gains, model: MBWParams, dt: float, res: Re
     The compensation (:class:`~hyst_model.effects.dynamics_online.SeriesResonanceInverse`) feeds the law the
     Smith-corrected measurement y₁ = y − Ĥx̂ + x̂ and the target x* = (r − F(q)x̂)/d̂, where x̂ = G(q)u is the base
     model's prediction, Ĥ = d̂ + F(q) the model's mode (d̂ its feed-through, F strictly causal) and the stage reads
-    y = γ·H(q)·G(q)·u. With the law u = C_r(q)·x* + q·C_y(q)·y₁ the loop is
-    1 = [−C_r·F/d̂ + q·C_y·(γH − Ĥ + 1)]·G. With the stage's mode equal to the model's and γ = 1 its poles are the
-    law's error poles, the zeros of Ĥ (the inverse's zero dynamics) and the mode's own poles: the mode is gone
-    from the loop, which only a mismatch brings back. (The slow mismatch that drives the inverse's state, 0.05 s,
-    is left out: it acts far below the mode.)
+    y = γ·H(q)·G(q)·u. With the law u = C_r(q)·x* + q·C_y(q)·y₁ (one denominator L for both paths,
+    :func:`reference_tf`; numerators R and Y) the loop is 1 = [−C_r·F/d̂ + q·C_y·(γH − Ĥ + 1)]·G, i.e. A − γB = 0:
+
+    A = L·d̂·Dh·Dt·Gd + R·(Nh − d̂·Dh)·Dt·Gn + d̂·q·Y·Gn·(Nh·Dt − Dh·Dt),  B = d̂·q·Y·Gn·Nt·Dh
+
+    (N/D: numerator and denominator of Ĥ (h), of the stage's mode (t) and of G). A mode the compensation reads a
+    sample late (:func:`_inverted_mode`) enters the predictor as q·Nh. With the stage's mode equal to the model's and
+    γ = 1 the poles are the law's error poles, the zeros of Ĥ (the inverse's zero dynamics) and the mode's own
+    poles: the mode is gone from the loop, which only a mismatch brings back. (The slow mismatch that drives the
+    inverse's state, 0.05 s, is left out: it acts far below the mode.)
     """
     rn, den = reference_tf(algorithm, gains, model, dt)
     yn = controller_tf(algorithm, gains, model, dt)[0]  # type: ignore[index]  # not None: reference_tf checked
     gn, gd = plant_tf(model, dt, None, mu)
     nh, dh, late = _inverted_mode(res, dt)
-    nt, dt_ = resonance_tf(stage, dt)
+    nt, dst = resonance_tf(stage, dt)
     d = float(nh[0])
     m = np.convolve  # products in q (np.polymul strips a leading zero coefficient: it would drop a factor q)
     q = np.array([0.0, 1.0])
     qd = np.r_[np.zeros(late), 1.0]  # the predictor compares with the model's reading that many samples late
-    a = _add(_add(d * m(m(den, m(gd, dh)), dt_), m(m(rn, _add(nh, -d * dh)), m(dt_, gn))),
-             d * m(m(q, m(yn, gn)), _add(m(m(qd, nh), dt_), -m(dh, dt_))))
+    a = _add(_add(d * m(m(den, m(gd, dh)), dst), m(m(rn, _add(nh, -d * dh)), m(dst, gn))),
+             d * m(m(q, m(yn, gn)), _add(m(m(qd, nh), dst), -m(dh, dst))))
     b = d * m(m(q, m(yn, gn)), m(nt, dh))
     return a, b
 
