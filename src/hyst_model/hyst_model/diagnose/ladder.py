@@ -250,11 +250,7 @@ def _other_order(s: Setup, trial: list, prev_m: Model, cur_val: float) -> None:
     # Any refit that improves on the rung, not only those it could take already: the other order can be what
     # makes an effect significant (generated creep + a slow trend: creep outside drift 1.34 nm, not enough against
     # 1.47 nm; inside it 1.17 nm, and creep was named).
-    best = [k for k in sorted(range(len(trial)), key=lambda k: trial[k][0])[:OTHER_ORDER_TOP]
-            if trial[k][0] < cur_val]
-    for i, res in zip(best, pmap(s, other, best)):
-        if res is not None and rmse(res[2][val]) < trial[i][0]:
-            trial[i] = (rmse(res[2][val]), trial[i][1], *res)
+    _retry_best(s, trial, cur_val, other)
 
 
 def _fresh_start(s: Setup, trial: list, cur_val: float) -> None:
@@ -279,9 +275,17 @@ def _fresh_start(s: Setup, trial: list, cur_val: float) -> None:
         own.say(f"refit {m2.name} from the base: validation RMSE {fmt_len(rmse((y - yh2)[val]))}")
         return m2, th2, y - yh2
 
+    _retry_best(s, trial, cur_val, fresh)
+
+
+def _retry_best(s: Setup, trial: list, cur_val: float, again) -> None:
+    """Fit the :data:`OTHER_ORDER_TOP` best entries of ``trial`` that improve on the rung (validation RMSE below
+    ``cur_val``) once more with ``again(own, index) -> (model, θ, residual) | None``, side by side; an entry is
+    replaced where the new fit validates better (never worse)."""
+    val = s.val
     best = [k for k in sorted(range(len(trial)), key=lambda k: trial[k][0])[:OTHER_ORDER_TOP]
             if trial[k][0] < cur_val]
-    for i, res in zip(best, pmap(s, fresh, best)):
+    for i, res in zip(best, pmap(s, again, best)):
         if res is not None and rmse(res[2][val]) < trial[i][0]:
             trial[i] = (rmse(res[2][val]), trial[i][1], *res)
 
