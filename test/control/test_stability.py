@@ -214,6 +214,7 @@ def test_a_compensated_mode_needs_less_derating_and_tolerates_its_envelope(algor
     name = "chi" if algorithm == "dppc" else "a_m"
     assert getattr(comp_v.gains, name) < getattr(raw.gains, name) - 0.05, (raw.message, comp_v.message)
     assert comp_v.running.robust
+    assert "compensated" in comp_v.message and "compensated" not in raw.message  # which loop was judged
     vals = {k: v for k, (v, _) in effect_parameters(DT, m.u_scale, m.y_scale).items() if k.startswith("dynamics.")}
     vals.update({"dynamics.fn": fn, "dynamics.zeta": zeta})
     for f in (1.0 - MODE_TOLERANCE[0], 1.0 + MODE_TOLERANCE[0]):

@@ -251,6 +251,10 @@ def guard(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | N
         return StabilityVerdict(algorithm, gains, None, None)
     chk = check_loop(algorithm, gains, model, dt, res, gain_margin, v_range)
     where = f"{algorithm} against the {res.fn:g} Hz resonance (zeta {res.zeta:g})"
+    if res.compensated:  # the user can tell which loop was judged
+        df, kz = MODE_TOLERANCE
+        where += (f", compensated (the loop with its inverse, for a stage mode within fn ±{df:.0%}, "
+                  f"zeta x/÷{kz:g})")
     if chk.robust:
         return StabilityVerdict(algorithm, gains, chk, chk, message=f"{where}: {chk.describe()}")
     what = "unstable" if not chk.stable else f"short of the {gain_margin:g}x gain margin"
