@@ -118,6 +118,19 @@ def test_node_derates_on_the_identified_resonance_and_stays_stable(harness, algo
     st = [s for a in got["diag"] for s in a.status if "derated" in s.message][-1]
     assert st.level == DiagnosticStatus.WARN
     assert {"stability", "spectral_radius", "gain_margin", "derated"} <= {kv.key for kv in st.values}
+    if algorithm == "pid":  # PID runs a notch at the resonance (stability.notch, default true), reported with it
+        assert run.notch_fn == 350.0 and "notch_fn=350" in {kv.key: kv.value for kv in st.values}["derated"]
+
+
+def test_the_pid_notch_can_be_switched_off(harness):
+    """stability.notch: false derates PID alone (as before the notch); true puts it back; a non-bool is refused."""
+    node, ex, pub, got = harness("-p", "algorithm:=pid", "-p", "stability.notch:=false", *RES)
+    plain = node._settings.gains("pid")
+    assert plain.notch_fn == 0.0 and node._settings.stability.warn
+    assert node.set_parameters([Parameter("stability.notch", value=True)])[0].successful
+    notched = node._settings.gains("pid")
+    assert notched.notch_fn == 350.0 and notched.kp > 2.0 * plain.kp
+    assert not node.set_parameters([Parameter("stability.notch", value="yes")])[0].successful
 
 
 @pytest.mark.parametrize("algorithm", ["dppc", "dmrac"])

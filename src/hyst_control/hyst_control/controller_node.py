@@ -131,6 +131,9 @@ class ControllerNode(AtomicParametersNode):
         d("stability.policy", "derate", ParameterDescriptor(
             description="gains unstable against model.dynamics (the stage resonance): derate (run the least-derated "
                         "robust gains, WARN) | warn (run them anyway, WARN) | refuse (reject, exit 2 at start)"))
+        d("stability.notch", True, ParameterDescriptor(
+            description="pid under policy derate, configured without a notch: also try a notch on the command at "
+                        "the identified resonance and run it when it keeps more gain (hyst_control.notch)"))
         d("stability.gain_margin", 2.0, ParameterDescriptor(
             description="gain margin (factor, both ways) the loop with the resonance must keep",
             floating_point_range=fp_range(1.0, 10.0)))
@@ -189,8 +192,11 @@ class ControllerNode(AtomicParametersNode):
         # checked as the compensation will run it (a mode it inverts is left only as a model error)
         res = identified_resonance(effects, dict(evals), plan_compensation(model, effects, dict(evals), dict(evals),
                                                                            1.0 / rate))
+        notch = get("stability.notch")
+        if not isinstance(notch, bool):
+            raise ControlError(f"stability.notch must be true or false, got {notch!r}")
         stab = cached_guard(alg, gains.get(alg), model, 1.0 / rate, res, policy, _F(get("stability.gain_margin")),
-                      (_F(get("v_min")), _F(get("v_max"))))  # StabilityError (a ControlError) = rejected
+                            (_F(get("v_min")), _F(get("v_max"))), notch)  # StabilityError (a ControlError) = rejected
         s = ControllerSettings(
             algorithm=alg, rate=_F(get("rate")),
             limits=CommandLimits(_F(get("v_min")), _F(get("v_max")), _F(get("slew_max")), _F(get("v_safe"))),

@@ -15,6 +15,7 @@ from hyst_model.effects.dynamics_kernels import zoh_matrices
 from .dmrac import DMRACGains
 from .dppc import DPPCGains
 from .errors import ConfigError
+from .notch import notch_tf
 from .pid import PIDGains
 
 __all__ = ["Resonance", "resonance_tf", "plant_tf", "controller_tf", "reference_tf", "compensated_char",
@@ -124,6 +125,9 @@ def controller_tf(algorithm: str, gains, model: MBWParams, dt: float) -> tuple[n
             filt = np.array([1.0, -(1.0 - a)])
             num = _add(np.polymul(num, filt), np.polymul(-a * g.kd / dt * np.array([1.0, -1.0]), den))
             den = np.polymul(den, filt)
+        if g.notch_fn > 0.0:  # the notch on the command (hyst_control.notch): in both paths, one denominator
+            nn, nd = notch_tf(g.notch_fn, g.notch_zeta_zero, g.notch_zeta_pole, dt)
+            num, den = np.convolve(num, nn), np.convolve(den, nd)
         return num, den
     raise ConfigError(f"no linearisation for algorithm {algorithm!r}")
 
@@ -148,6 +152,8 @@ def reference_tf(algorithm: str, gains, model: MBWParams, dt: float) -> tuple[np
     num = np.array([g.kp + g.ki * dt, -g.kp]) if g.ki > 0.0 else np.array([g.kp])
     if g.kd > 0.0:  # the derivative's filter is in the common denominator
         num = np.convolve(num, [1.0, -(1.0 - dt / (g.t_filter + dt))])
+    if g.notch_fn > 0.0:
+        num = np.convolve(num, notch_tf(g.notch_fn, g.notch_zeta_zero, g.notch_zeta_pole, dt)[0])
     return num, den
 
 

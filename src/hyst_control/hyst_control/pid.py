@@ -3,6 +3,8 @@
 PID (SI gains): u = K_p·e + I + D with e = r − y,
 I_k = I_{k−1} + Δt·(K_i·e_k + (u_sat − u_raw)/T_t)  (back-calculation anti-windup, T_t = ``t_track``),
 D = derivative of −y (no kick on reference steps) through a first-order filter with time constant ``t_filter``.
+With ``notch_fn`` > 0 the sum passes a notch (:mod:`hyst_control.notch`) before the limiter: the stage resonance
+taken out of the command instead of every gain slowed down (the back-calculation sees the notched command).
 Bumpless start: :meth:`PID.reset` preloads I so that the first output equals the command in force.
 
 Open loop (:class:`OpenLoop`): the same one-step inversion as (4.11) with χ → 0, but driven by the model's own
@@ -20,6 +22,7 @@ from hyst_model.core import MBWParams, mbw_step
 
 from .base import BaseController, ModelBased, invert_nu
 from .errors import ConfigError
+from .notch import Notch
 
 __all__ = ["PIDGains", "PID", "OpenLoop"]
 
@@ -51,12 +54,24 @@ class PIDGains:
     kd: float = param(0.0, 0.0, 1e6, "derivative gain (V s/m)")
     t_filter: float = param(2e-3, 1e-6, 1.0, "derivative filter time constant (s)")
     t_track: float = param(5e-3, 1e-6, 10.0, "anti-windup back-calculation time constant (s)")
+    notch_fn: float = param(0.0, 0.0, 1e5, "notch on the command at this frequency (Hz; 0 = none); the stability "
+                                           "check places one at an identified resonance (stability.notch)")
+    notch_zeta_zero: float = param(0.05, 1e-4, 10.0, "notch zero damping (depth: zeta_zero/zeta_pole at fn)")
+    notch_zeta_pole: float = param(0.5, 1e-4, 10.0, "notch pole damping (width)")
 
     def __post_init__(self) -> None:
         if not all(math.isfinite(v) and v >= 0 for v in (self.kp, self.ki, self.kd)):
             raise ConfigError("PID gains must be finite and >= 0")
         if not (self.t_filter > 0 and self.t_track > 0):
             raise ConfigError("PID t_filter and t_track must be positive")
+        if not (math.isfinite(self.notch_fn) and self.notch_fn >= 0):
+            raise ConfigError("PID notch_fn must be finite and >= 0 (0 = no notch)")
+        if not (0 < self.notch_zeta_zero <= 10 and 0 < self.notch_zeta_pole <= 10):
+            raise ConfigError("PID notch dampings must lie in (0, 10]")
+
+    def notch(self, dt: float) -> Notch | None:
+        """The command notch these gains ask for at sample period ``dt`` (None without one)."""
+        return Notch(self.notch_fn, self.notch_zeta_zero, self.notch_zeta_pole, dt) if self.notch_fn > 0 else None
 
 
 class PID(BaseController):
@@ -72,22 +87,39 @@ class PID(BaseController):
     def __init__(self, dt: float, gains: PIDGains = PIDGains(), limits: CommandLimits | None = None) -> None:
         super().__init__(dt, limits)
         self.gains = gains
+        self._notch = gains.notch(dt)  # ConfigError for a notch the sample rate cannot hold
         self._i = 0.0
         self._d = 0.0
         self._raw = math.nan
+        self._pre = math.nan  # the sum before the notch
         self._e = 0.0
 
     def set_gains(self, gains: PIDGains) -> None:
-        """Swap gains bumplessly: the integrator absorbs the change of the proportional term."""
+        """Swap gains bumplessly: the integrator absorbs the change of the proportional term; a changed notch starts
+        in steady state at the last output, the integrator absorbing what its old state held back."""
+        notch = gains.notch(self.dt)
         if math.isfinite(self._e):
             self._i += (self.gains.kp - gains.kp) * self._e
+        old = self._notch
+        same = (old is None and notch is None) or (old is not None and notch is not None and
+                                                    (old.fn, old.zeta_zero, old.zeta_pole) ==
+                                                    (notch.fn, notch.zeta_zero, notch.zeta_pole))
+        if not same:
+            if math.isfinite(self._raw) and math.isfinite(self._pre):
+                self._i += self._raw - self._pre  # the sum now equals the output in force
+                self._pre = self._raw
+                if notch is not None:
+                    notch.reset(self._raw)
+            self._notch = notch
         self.gains = gains
 
     def _on_reset(self, y0: float, u0: float, r0: float) -> None:
         self._e = r0 - y0
         self._d = 0.0
         self._i = u0 - self.gains.kp * self._e  # first output = u0: bumpless
-        self._raw = u0
+        self._raw = self._pre = u0
+        if self._notch is not None:
+            self._notch.reset(u0)
 
     def _law(self, r_k: float, y: float) -> float:
         g, dt = self.gains, self.dt
@@ -96,7 +128,8 @@ class PID(BaseController):
         self._d += a * (-g.kd * (y - self._y_prev) / dt - self._d)
         self._i += g.ki * dt * e
         self._e = e
-        self._raw = g.kp * e + self._i + self._d
+        self._pre = g.kp * e + self._i + self._d
+        self._raw = self._notch.step(self._pre) if self._notch is not None else self._pre
         return self._raw
 
     def _commit(self, u: float) -> None:

@@ -23,7 +23,8 @@ Controller linearisations (model units, then ÷ g_c = μ̂·y_scale/u_scale, ν 
 * DPPC (4.10)–(4.14): y_r = r_k − δ1·y_{k−1} + f(e_{k−1}) − z, f the funnel term λ(h̄e^{2χε} − h̲)/(1 + e^{2χε})
   with slope s = f′(0) (= χ when h̲ = h̄), z = ki·Σe: C_y = [(s − δ1)(1 − q) − ki] / [g_c(1 − δ2q)(1 − q)].
 * DMRAC (5.24)–(5.25) with the estimates frozen (κ small: adaptation is slow): C_y = (a_m − δ1)/[g_c(1 − δ2q)].
-* PID (:class:`hyst_control.pid.PID`): C_y = −K_p − K_i·Δt/(1 − q) − a·K_d/Δt·(1 − q)/(1 − (1 − a)q).
+* PID (:class:`hyst_control.pid.PID`): C_y = −K_p − K_i·Δt/(1 − q) − a·K_d/Δt·(1 − q)/(1 − (1 − a)q), times the
+  command notch N(q) when it has one (:mod:`hyst_control.notch`).
 * open loop: no feedback; stable whenever the stage is (ζ > 0).
 
 For DPPC and DMRAC the model's gain cancels (the laws invert it), so the check does not depend on μ; for PID
@@ -34,6 +35,10 @@ measurement, inverse on the reference) the loop is a different one, :func:`compe
 mode is gone from it, and what is checked is a mismatch — the gain error γ as above, for every stage mode within
 :data:`MODE_TOLERANCE` of the identified one. Checked against the raw mode instead, generated stage 1008 (314 Hz,
 inverted) ran DMRAC derated to a_m 0.91 at 32× its mode-free twin; checked as compensated it tracks at 1×.
+
+PID is model-free: derated it can only be slowed down. :func:`guard` also tries a notch on its command at the
+identified mode (:func:`notched`, as commercial piezo controllers offer) and runs it when it keeps more gain; a
+notch relies on the identified mode as compensation does, so a notched loop is checked over the same envelope.
 """
 from __future__ import annotations
 
@@ -47,10 +52,11 @@ from hyst_model.core import MBWParams
 from .errors import ConfigError
 from .loop_tf import (Resonance, _add, _mu_max, closed_loop_poles, compensated_char, controller_tf, plant_tf,
                       radii, reference_tf, resonance_tf)
+from .notch import NYQUIST_SHARE
 
 __all__ = ["Resonance", "identified_resonance", "LoopCheck", "StabilityVerdict", "StabilityError", "POLICIES",
            "resonance_tf", "controller_tf", "reference_tf", "plant_tf", "compensated_char", "closed_loop_poles",
-           "radii", "check_loop", "derate", "guard", "MODE_TOLERANCE"]
+           "radii", "check_loop", "derate", "guard", "notched", "MODE_TOLERANCE", "NOTCH_ZETA_POLE"]
 
 POLICIES = ("derate", "warn", "refuse")
 _G_MAX = 1e3  # gain margins are searched up to this factor (60 dB); beyond it they are reported as inf
@@ -127,13 +133,26 @@ def _pairs(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | 
     c = controller_tf(algorithm, gains, model, dt)
     if c is None:
         return None
-    if res is None or not res.compensated:
-        pn, pd = plant_tf(model, dt, res, mu)
-        cn, cd = c
+    cn, cd = c
+    if res is None:
+        pn, pd = plant_tf(model, dt, None, mu)
         return [(np.polymul(cd, pd), np.concatenate(([0.0], np.polymul(cn, pn))))]
     df, kz = MODE_TOLERANCE
-    return [compensated_char(algorithm, gains, model, dt, res, replace(res, fn=res.fn * f, zeta=res.zeta * z), mu)
-            for f in (1.0, 1.0 - df, 1.0 + df) for z in (1.0, 1.0 / kz, kz)]
+    stages = [replace(res, fn=res.fn * f, zeta=res.zeta * z) for f in (1.0, 1.0 - df, 1.0 + df)
+              for z in (1.0, 1.0 / kz, kz)]
+    if res.compensated:
+        return [compensated_char(algorithm, gains, model, dt, res, st, mu) for st in stages]
+    if not _notched(algorithm, gains):  # the raw loop relies on nothing but the gain: the mode as identified
+        stages = stages[:1]
+    out = []
+    for st in stages:  # a notch designed on the identified mode must hold for the stage's mode off it
+        pn, pd = plant_tf(model, dt, st, mu)
+        out.append((np.polymul(cd, pd), np.concatenate(([0.0], np.polymul(cn, pn)))))
+    return out
+
+
+def _notched(algorithm: str, gains) -> bool:
+    return algorithm == "pid" and gains is not None and float(getattr(gains, "notch_fn", 0.0)) > 0.0
 
 
 def _worst(pairs, gammas) -> np.ndarray:
@@ -214,6 +233,16 @@ def _candidate(algorithm: str, gains, t: float):
 
 
 _DERATED = {"dppc": ("chi", "ki"), "dmrac": ("a_m",), "pid": ("kp", "ki", "kd")}
+#: What the guard may change (reported): the derated gains, and PID's notch.
+_CHANGED = dict(_DERATED, pid=("kp", "ki", "kd", "notch_fn", "notch_zeta_zero", "notch_zeta_pole"))
+#: Pole damping of the notch the guard places (:func:`notched`): the mode's lightly damped pair replaced by a
+#: critically damped one. Wider notches let the linear check keep more gain (ζp 5: a lag pole near fn/10) but
+#: slow the loop below the mode; 1 is the widest that adds no pole below the mode's frequency.
+NOTCH_ZETA_POLE = 1.0
+
+
+def _notchable(algorithm: str, gains) -> bool:
+    return algorithm == "pid" and gains is not None and float(getattr(gains, "notch_fn", 0.0)) == 0.0
 
 
 def derate(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | None, gain_margin: float = 2.0,
@@ -237,13 +266,30 @@ def derate(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | 
     return _candidate(algorithm, gains, hi)
 
 
+def notched(gains, res: Resonance, dt: float):
+    """PID gains with the command notch at the identified mode (:mod:`hyst_control.notch`): zeros at the mode's
+    own damping (they cancel its poles), poles at :data:`NOTCH_ZETA_POLE`; None when the rate cannot hold it."""
+    if res.fn >= NYQUIST_SHARE * 0.5 / dt:
+        return None
+    return replace(gains, notch_fn=res.fn, notch_zeta_zero=min(res.zeta, NOTCH_ZETA_POLE),
+                   notch_zeta_pole=NOTCH_ZETA_POLE)
+
+
+def _scale(algorithm: str, ran) -> float:
+    """How much of the loop gain derated gains keep (for comparing two deratings of one law)."""
+    return float(ran.kp) if algorithm == "pid" else 0.0
+
+
 def guard(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | None, policy: str = "derate",
-          gain_margin: float = 2.0, v_range: tuple[float, float] = (0.0, 150.0)) -> StabilityVerdict:
+          gain_margin: float = 2.0, v_range: tuple[float, float] = (0.0, 150.0), notch: bool = True
+          ) -> StabilityVerdict:
     """Check the configured gains against ``res`` and decide what runs.
 
     ``policy``: ``derate`` (default) runs the least-derated robust gains with a warning; ``warn`` runs the
     configured gains with a warning; ``refuse`` raises :class:`StabilityError` with the reason. Without a
-    resonance nothing is checked (the MBW loops are stable by (4.21) and (5.40)).
+    resonance nothing is checked (the MBW loops are stable by (4.21) and (5.40)). ``notch`` (PID under
+    ``derate``, configured without one): a notch at the identified mode (:func:`notched`) is tried too, and runs
+    when it needs less derating (it is then checked for every stage mode of :data:`MODE_TOLERANCE`).
     """
     if policy not in POLICIES:
         raise ConfigError(f"stability policy must be one of {', '.join(POLICIES)}, got {policy!r}")
@@ -266,13 +312,22 @@ def guard(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | N
                                 message=f"{where}: configured gains {what} ({chk.describe()}), running them "
                                         "anyway (stability.policy = warn)")
     new = derate(algorithm, gains, model, dt, res, gain_margin, v_range)
+    with_notch = notched(gains, res, dt) if notch and _notchable(algorithm, gains) else None
+    if with_notch is not None:
+        alt = with_notch if check_loop(algorithm, with_notch, model, dt, res, gain_margin, v_range).robust else \
+            derate(algorithm, with_notch, model, dt, res, gain_margin, v_range)
+        if alt is not None and (new is None or _scale(algorithm, alt) > _scale(algorithm, new)):
+            new = alt
     if new is None:
         raise StabilityError(f"{where}: the configured gains are {what} ({chk.describe()}) and no derating of "
                              f"{', '.join(_DERATED.get(algorithm, ()))} reaches a {gain_margin:g}x margin")
     run = check_loop(algorithm, new, model, dt, res, gain_margin, v_range)
-    changed = tuple((n, float(getattr(gains, n)), float(getattr(new, n))) for n in _DERATED[algorithm]
+    changed = tuple((n, float(getattr(gains, n)), float(getattr(new, n))) for n in _CHANGED[algorithm]
                     if getattr(gains, n) != getattr(new, n))
-    txt = ", ".join(f"{n} {a:.4g} -> {b:.4g}" for n, a, b in changed)
+    txt = ", ".join(f"{n} {a:.4g} -> {b:.4g}" for n, a, b in changed if not n.startswith("notch"))
+    if any(n.startswith("notch") for n, _, _ in changed):
+        txt += (f"{', ' if txt else ''}with a notch on the command at {new.notch_fn:g} Hz (zeta {new.notch_zeta_zero:g}"
+                f" / {new.notch_zeta_pole:g})")
     return StabilityVerdict(algorithm, new, chk, run, changed, True,
                             f"{where}: configured gains {what} ({chk.describe()}); running derated {txt} "
                             f"({run.describe()})")
