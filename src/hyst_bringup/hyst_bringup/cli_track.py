@@ -64,6 +64,9 @@ def register(subparsers) -> None:
                         "checked against it (hyst_control.stability)")
     p.add_argument("--stability", choices=("derate", "warn", "refuse"), default="derate",
                    help="gains unstable against --resonance: derate them (default), warn and run them, or refuse")
+    p.add_argument("--notch", action=argparse.BooleanOptionalAction, default=True,
+                   help="pid under --stability derate: also try a notch on the command at the resonance and run it "
+                        "when it keeps more gain (default; the node's stability.notch)")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     p.add_argument("--params", default=None, metavar="P.yaml",
                    help="controller model from this params file (hyst fit / hyst diagnose --out); default: the "
@@ -181,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
     if resonance is not None:
         stab = guard(args.algorithm, gains if gains is not None or args.algorithm == "open_loop" else
                      make_controller(args.algorithm, model, 1.0 / args.rate).gains, model, 1.0 / args.rate,
-                     resonance, args.stability)
+                     resonance, args.stability, notch=args.notch)
         gains = stab.gains
         if stab.warn:
             print(f"hyst track: warning: {stab.message}", file=sys.stderr)

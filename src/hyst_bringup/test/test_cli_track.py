@@ -91,3 +91,15 @@ def test_track_on_a_resonant_stage_is_derated_with_a_warning_or_stable(algorithm
     assert json.loads(capsys.readouterr().out)["rmse"] > 5e-6
     assert main(["track", "--algorithm", algorithm, "--resonance", "350:0.04", "--stability", "refuse"]) == 2
     assert "unstable" in capsys.readouterr().err
+
+
+def test_track_pid_runs_a_notch_at_the_resonance_unless_told_not_to(capsys):
+    """PID on the resonant stage: by default with a notch at 350 Hz (and less derating, a better 10 Hz sine);
+    ``--no-notch`` derates the gains alone."""
+    runs = {}
+    for flag in ("--notch", "--no-notch"):
+        assert main(["track", "--algorithm", "pid", "--resonance", "350:0.04", "--seconds", "1", flag, "--json"]) == 0
+        runs[flag] = json.loads(capsys.readouterr().out)
+    assert runs["--notch"]["derated"].get("notch_fn") == 350.0 and "notch_fn" not in runs["--no-notch"]["derated"]
+    assert runs["--notch"]["derated"]["kp"] > 2 * runs["--no-notch"]["derated"]["kp"]
+    assert runs["--notch"]["rmse"] < 0.5 * runs["--no-notch"]["rmse"]
