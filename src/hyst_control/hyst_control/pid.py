@@ -74,6 +74,10 @@ class PIDGains:
         return Notch(self.notch_fn, self.notch_zeta_zero, self.notch_zeta_pole, dt) if self.notch_fn > 0 else None
 
 
+def _notch_key(g: PIDGains) -> tuple[float, float, float] | None:
+    return (g.notch_fn, g.notch_zeta_zero, g.notch_zeta_pole) if g.notch_fn > 0 else None
+
+
 class PID(BaseController):
     """PID with back-calculation anti-windup and filtered derivative on the measurement."""
 
@@ -100,11 +104,7 @@ class PID(BaseController):
         notch = gains.notch(self.dt)
         if math.isfinite(self._e):
             self._i += (self.gains.kp - gains.kp) * self._e
-        old = self._notch
-        same = (old is None and notch is None) or (old is not None and notch is not None and
-                                                    (old.fn, old.zeta_zero, old.zeta_pole) ==
-                                                    (notch.fn, notch.zeta_zero, notch.zeta_pole))
-        if not same:
+        if _notch_key(gains) != _notch_key(self.gains):
             if math.isfinite(self._raw) and math.isfinite(self._pre):
                 self._i += self._raw - self._pre  # the sum now equals the output in force
                 self._pre = self._raw

@@ -275,11 +275,6 @@ def notched(gains, res: Resonance, dt: float):
                    notch_zeta_pole=NOTCH_ZETA_POLE)
 
 
-def _scale(algorithm: str, ran) -> float:
-    """How much of the loop gain derated gains keep (for comparing two deratings of one law)."""
-    return float(ran.kp) if algorithm == "pid" else 0.0
-
-
 def guard(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | None, policy: str = "derate",
           gain_margin: float = 2.0, v_range: tuple[float, float] = (0.0, 150.0), notch: bool = True
           ) -> StabilityVerdict:
@@ -316,7 +311,7 @@ def guard(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | N
     if with_notch is not None:
         alt = with_notch if check_loop(algorithm, with_notch, model, dt, res, gain_margin, v_range).robust else \
             derate(algorithm, with_notch, model, dt, res, gain_margin, v_range)
-        if alt is not None and (new is None or _scale(algorithm, alt) > _scale(algorithm, new)):
+        if alt is not None and (new is None or alt.kp > new.kp):  # PID's gains derate by one factor: kp tells
             new = alt
     if new is None:
         raise StabilityError(f"{where}: the configured gains are {what} ({chk.describe()}) and no derating of "
