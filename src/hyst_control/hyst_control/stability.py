@@ -242,7 +242,8 @@ NOTCH_ZETA_POLE = 1.0
 
 
 def _notchable(algorithm: str, gains) -> bool:
-    return algorithm == "pid" and gains is not None and float(getattr(gains, "notch_fn", 0.0)) == 0.0
+    """PID gains without a notch of their own (the guard may place one)."""
+    return algorithm == "pid" and gains is not None and not _notched(algorithm, gains)
 
 
 def derate(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | None, gain_margin: float = 2.0,
@@ -306,11 +307,12 @@ def guard(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | N
         return StabilityVerdict(algorithm, gains, chk, chk, warn=True,
                                 message=f"{where}: configured gains {what} ({chk.describe()}), running them "
                                         "anyway (stability.policy = warn)")
-    new = derate(algorithm, gains, model, dt, res, gain_margin, v_range)
     with_notch = notched(gains, res, dt) if notch and _notchable(algorithm, gains) else None
-    if with_notch is not None:
-        alt = with_notch if check_loop(algorithm, with_notch, model, dt, res, gain_margin, v_range).robust else \
-            derate(algorithm, with_notch, model, dt, res, gain_margin, v_range)
+    if with_notch is not None and check_loop(algorithm, with_notch, model, dt, res, gain_margin, v_range).robust:
+        new = with_notch  # the configured gains with the notch: no derating can keep more gain
+    else:
+        new = derate(algorithm, gains, model, dt, res, gain_margin, v_range)
+        alt = derate(algorithm, with_notch, model, dt, res, gain_margin, v_range) if with_notch is not None else None
         if alt is not None and (new is None or alt.kp > new.kp):  # PID's gains derate by one factor: kp tells
             new = alt
     if new is None:
