@@ -43,6 +43,7 @@ from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scal
                     default_fitter, guarded_refit, refit, rmse, validation_mask)
 from .parallel import default_jobs
 from .prune import prune
+from .swap import swap
 from .ladder import climb
 from .stages import Candidate, Rung, Setup, refit_all, screen_all, verdict
 from .unexplained import UNEXPLAINED_FACTOR, Unexplained
@@ -188,6 +189,9 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     ranked = refit_all(s, cands, carry, full)                        # 2. each refitted jointly, tested
     ladder, models, chosen = climb(s, ranked, cands, carry, full)    # 3. the error ladder
     chosen = prune(s, ladder, models, chosen, cands)                 # 3b. and its backward step
+    chosen, swapped = swap(s, ladder, models, chosen, cands, full)  # 3c. and its exchange step
+    if swapped:
+        chosen = prune(s, ladder, models, chosen, cands)
     ranked, missing, unexplained, expl = verdict(s, cands, ladder, models, chosen, unexplained_factor,
                                                  _explain)           # 4. the answer in words
     return Diagnosis(base, s.base_val, rmse(s.e_base[train]), noise, ranked, missing, ladder, expl, n, dt,
