@@ -198,7 +198,8 @@ class Saturation(_Effect):
     """Smooth stroke limit: the end(s) of the stroke lose ``strength·S`` plus a soft knee of width ``2·strength·S``.
 
     Linear inside the knee, ``tanh`` beyond it (C¹ at the knee). A unipolar stage (PEA) saturates at the top
-    only; a bipolar one (GMA) at both ends (``two_sided``: None = from the profile).
+    only; a bipolar one (GMA) at both ends (``two_sided``: None = from the profile). Two-sided above a strength
+    of 1/6 the knees would overlap; they meet at mid-stroke instead (:func:`saturation_kernel`).
     """
 
     name: ClassVar[str] = "saturation"
@@ -309,7 +310,13 @@ def asymmetry_kernel(x: float, beta: float, x_mid: float, half: float) -> float:
 
 @njit(cache=True)
 def saturation_kernel(x: float, lo: float, hi: float, w: float) -> float:
-    """Soft limit to ``[lo, hi]`` with knees of width ``w`` (identity between ``lo + w`` and ``hi − w``)."""
+    """Soft limit to ``[lo, hi]`` with knees of width ``w`` (identity between ``lo + w`` and ``hi − w``).
+
+    Two-sided knees never overlap: the width acting is at most ``(hi − lo)/2``, so strong limits have their knees
+    meet at mid-range with slope 1 on both sides (monotonic, C¹), as hyst_model's saturation effect
+    (``knee_width``). Overlapping knees were a different map depending on which branch was tested first.
+    """
+    w = min(w, 0.5 * (hi - lo))  # lo = −inf (one-sided): w unchanged
     k = hi - w
     if x > k:
         return k + w * math.tanh((x - k) / w)

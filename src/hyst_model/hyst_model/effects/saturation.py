@@ -7,13 +7,19 @@ the further out. The effect is the identity inside a knee and a tanh soft limit 
     y = k_hi + w · tanh((x − k_hi) / w)   for x > k_hi = top − w        (x = y_inner)
     y = k_lo − w · tanh((k_lo − x) / w)   for x < k_lo = bottom + w      (two-sided only)
 
-``top`` and ``bottom`` (m) are the asymptotic limits, ``w`` (m) the knee width. A stage may saturate at the top
-only (a preloaded stack driven against its stop) or at both ends (a flexure stiffening both ways, a sensor's
-range, and an amplifier's rails whatever the sign of its input): ``saturation.two_sided`` is configuration stored
-in the params file. ``hyst diagnose`` fits both (:meth:`Saturation.variants`) and keeps whichever validates
-better; without it being set, :meth:`Saturation.start` guesses from the input's sign (bipolar: both ends) — the
-guess alone missed the lower knee of unipolar piezo records with a symmetric soft limit, which then took an
-asymmetry to imitate it.
+``top`` and ``bottom`` (m) are the asymptotic limits, ``w`` (m) the knee width. Two-sided knees never overlap:
+the width acting is ``min(w, (top − bottom)/2)`` (:func:`knee_width`), so a strong limit — more than a sixth of
+the stroke lost at each end with knees twice as wide as the loss — has its knees meet at mid-range, where both
+branches have slope 1 (the map stays monotonic and C¹). Overlapping knees made the map a different function
+depending on which branch was evaluated last: hyst_sim took the upper one, this effect the lower one, and two
+generated GMA stages (0.19 of the stroke lost at each end) could not be fitted below 22x their noise.
+
+A stage may saturate at the top only (a preloaded stack driven against its stop) or at both ends (a flexure
+stiffening both ways, a sensor's range, and an amplifier's rails whatever the sign of its input):
+``saturation.two_sided`` is configuration stored in the params file. ``hyst diagnose`` fits both
+(:meth:`Saturation.variants`) and keeps whichever validates better; without it being set, :meth:`Saturation.start`
+guesses from the input's sign (bipolar: both ends) — the guess alone missed the lower knee of unipolar piezo records
+with a symmetric soft limit, which then took an asymmetry to imitate it.
 """
 from __future__ import annotations
 
@@ -26,19 +32,29 @@ from .base import Effect
 from .online import OnlineEffect
 from .signals import corr
 
-__all__ = ["Saturation", "SaturationInverse", "soft_limit"]
+__all__ = ["Saturation", "SaturationInverse", "soft_limit", "knee_width"]
+
+
+def knee_width(top: float, bottom: float, w: float, two_sided: bool) -> float:
+    """The knee width acting: ``w``, but at most half the distance between two-sided limits (the knees meet at
+    mid-range instead of overlapping; see the module docstring). Limits in the wrong order keep ``w`` (the upper
+    branch then takes precedence, as everywhere below)."""
+    if two_sided and top > bottom:
+        return min(w, 0.5 * (top - bottom))
+    return w
 
 
 def soft_limit(x: np.ndarray, top: float, bottom: float, w: float, two_sided: bool) -> np.ndarray:
     """The saturation map (see module docstring)."""
     x = np.asarray(x, dtype=np.float64)
     y = x.copy()
+    w = knee_width(top, bottom, w, two_sided)
     k = top - w
-    m = x > k
-    y[m] = k + w * np.tanh((x[m] - k) / w)
+    up = x > k
+    y[up] = k + w * np.tanh((x[up] - k) / w)
     if two_sided:
         k = bottom + w
-        m = x < k
+        m = (x < k) & ~up
         y[m] = k - w * np.tanh((k - x[m]) / w)
     return y
 
@@ -132,7 +148,8 @@ class SaturationInverse(OnlineEffect):
     predictive = True
 
     def __init__(self, top: float, bottom: float, width: float, two_sided: bool) -> None:
-        self._top, self._bot, self._w, self._two = top, bottom, width, two_sided
+        self._top, self._bot, self._two = top, bottom, two_sided
+        self._w = knee_width(top, bottom, width, two_sided)
         self.limited = 0
 
     def _inner(self, y: float) -> float:
@@ -140,7 +157,7 @@ class SaturationInverse(OnlineEffect):
         k = self._top - w
         if y > k:
             return k + w * math.atanh(min((y - k) / w, self.REACH))
-        if self._two:
+        if self._two:  # below the upper knee: the lower branch (as soft_limit, the upper one first)
             k = self._bot + w
             if y < k:
                 return k - w * math.atanh(min((k - y) / w, self.REACH))
