@@ -7,9 +7,10 @@ drift, a 3-parameter mode (11.7 nm) beat the 1-parameter delay (13.8 nm) at the 
 towards the drift; drift then took the model to the noise floor (1.64 nm) on top of the mode, and the delay, which
 adds nothing on top of a mode, was never tried with the drift. Stepwise regression's exchange step answers this:
 each effect of the final model is replaced in turn by each candidate that was significant on its own, the rest
-refitted from the final model's values, and the replacement is taken when it validates as well (the paired test
-that admits effects does not tell them apart) with fewer parameters, or significantly better. Identification
-never goes backwards: a replacement is never significantly worse on validation than the model it replaces.
+refitted from the final model's values, and the replacement is taken when it validates as well (the test that
+admits an effect, ``min_factor`` and the paired t, does not tell them apart) with fewer parameters, or passes that
+test against the model. Identification never goes backwards: a replacement is never worse on validation than the
+model it replaces by more than that test allows.
 """
 from __future__ import annotations
 
