@@ -80,9 +80,24 @@ class Asymmetry(Effect):
 
     @classmethod
     def data_config(cls, t, u, y, scored):
-        """The output range the identification scores: where a kink's level may lie."""
-        ys = np.asarray(y, float)[np.asarray(scored, bool)]
-        return {"asymmetry.y_lo": float(np.min(ys)), "asymmetry.y_hi": float(np.max(ys))} if ys.size else {}
+        """The output range the identification scores (where a kink's level may lie), and the quadratic's centres
+        at the middle of the record's input and output ranges.
+
+        The centres are configuration, not something :meth:`start` sets on one instance: a model composed again
+        from the configuration (a refit's guarded start, a ladder rung refitted in another order) must read the
+        fitted ``a_u``, ``a_y`` about the same centres. With the centres left at 0 there, generated stage 1100169's
+        quadratic rung (37.4 nm on validation) read 296 nm from its own parameters, the guard against refits that
+        end worse than their start compared against that, and a refit ending at 40.0 nm was kept over the 31.7 nm
+        it had started from.
+        """
+        u = np.asarray(u, float)
+        yy = np.asarray(y, float)
+        out = {"asymmetry.u_c": 0.5 * (float(np.min(u)) + float(np.max(u))),
+               "asymmetry.y_c": 0.5 * (float(np.min(yy)) + float(np.max(yy)))} if u.size and yy.size else {}
+        ys = yy[np.asarray(scored, bool)]
+        if ys.size:
+            out.update({"asymmetry.y_lo": float(np.min(ys)), "asymmetry.y_hi": float(np.max(ys))})
+        return out
 
     @property
     def _width(self) -> float:
@@ -120,9 +135,12 @@ class Asymmetry(Effect):
     def start(self, t, u, y, residual):
         if self.form == "kink":
             return self._kink_start(np.asarray(y, float) - residual, np.asarray(residual, float))
-        # Centre on the data, then regress the residual on the even input term.
-        self.u_c = 0.5 * (float(np.min(u)) + float(np.max(u)))
-        self.y_c = 0.5 * (float(np.min(y)) + float(np.max(y)))
+        # Centre on the data (unless the configuration holds the centres: :meth:`data_config`), then regress the
+        # residual on the even input term.
+        if "asymmetry.u_c" not in self._config:
+            self.u_c = 0.5 * (float(np.min(u)) + float(np.max(u)))
+        if "asymmetry.y_c" not in self._config:
+            self.y_c = 0.5 * (float(np.min(y)) + float(np.max(y)))
         q = ((np.asarray(u, float) - self.u_c) / self.u_scale) ** 2
         q = q - q.mean()
         den = float(q @ q)
