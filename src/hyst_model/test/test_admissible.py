@@ -46,3 +46,23 @@ def test_hyst_fit_reports_admissibility_in_json_and_text(tmp_path, capsys):
     assert set(adm) == {"remark_4_1", "violations", "at_bounds", "controllers"} and adm["controllers"]
     assert main(["fit", str(csv), "--quiet"]) == 0
     assert "controllers:" in capsys.readouterr().out
+
+
+def test_hyst_diagnose_checks_the_model_it_hands_on_as_hyst_fit_does(tmp_path, capsys):
+    """One path: the model diagnose names (and ``--out`` saves) gets the same Remark 4.1 / bounds check as a fit,
+    in the JSON, the text and the params file's provenance."""
+    import yaml
+    t = np.arange(4000) * 5e-4
+    u = 75 + 60 * np.sin(2 * np.pi * 2 * t) + 10 * np.sin(2 * np.pi * 9 * t)
+    y = pea_default().simulate(u) + 2e-9 * np.random.default_rng(0).standard_normal(t.size)
+    csv = tmp_path / "r.csv"
+    write_csv(csv, {"t": t, "u": u, "y": y})
+    out = tmp_path / "p.yaml"
+    main(["diagnose", str(csv), "--json", "--quiet", "--out", str(out)])
+    obj = json.loads(capsys.readouterr().out)
+    adm = obj["admissibility"]
+    assert set(adm) == {"remark_4_1", "violations", "at_bounds", "controllers"} and adm["controllers"]
+    spec = yaml.safe_load(out.read_text())
+    assert adm["controllers"] in json.dumps(spec, ensure_ascii=False)  # the params file says the same
+    main(["diagnose", str(csv), "--quiet"])
+    assert f"controllers ({obj['ladder'][-1]['model']}): {adm['controllers']}" in capsys.readouterr().out

@@ -61,7 +61,7 @@ def _clean(o):
     return o
 
 
-def _text(d, source: str) -> str:
+def _text(d, source: str, adm=None) -> str:
     from ..effects.signals import fmt_len
     lines = [f"hyst diagnose: {source} ({d.n_samples} samples at {1.0 / d.dt:.6g} Hz, {d.seconds:.1f} s)",
              f"baseline {d.base}: validation RMSE {fmt_len(d.baseline_rmse)} "
@@ -80,6 +80,9 @@ def _text(d, source: str) -> str:
         eff = ",".join(d.ladder[-1].effects)
         lines.append(f"next: hyst diagnose DATA --out params.yaml saves {d.ladder[-1].model} as fitted here "
                      f"(or refit it: hyst fit DATA --model {d.base} --effects {eff})")
+    if adm is not None:
+        lines.append(f"controllers ({d.ladder[-1].model}): {adm.controllers}")
+        lines += [f"  {v}" for v in adm.violations + adm.at_bounds]
     return "\n".join(lines)
 
 
@@ -109,12 +112,17 @@ def run(args: argparse.Namespace) -> int:
     rec = load_checked(args)
     d = diagnose(rec.t, rec.u, rec.y, base=args.base, effects=names, progress=not args.quiet, config=user_cfg,
                  jobs=args.jobs)
+    # The model diagnose hands on is checked as hyst fit checks its fit (one path): Remark 4.1 and parameters on
+    # their bounds, in the text, the JSON and the params file's provenance.
+    from ..identify.admissible import check_admissible
+    adm = check_admissible(*d.models[d.ladder[-1].model])
     out_path = None
     if args.out:
         from ..io import spec_from_model, write_params
         best = d.ladder[-1]
         model, theta = d.models[best.model]
-        prov = {"method": "diagnose", "rmse": best.rmse, "rmse_train": best.rmse_train, "data": str(args.data)}
+        prov = {"method": "diagnose", "rmse": best.rmse, "rmse_train": best.rmse_train, "data": str(args.data),
+                "controllers": adm.controllers}
         out_path = str(write_params(args.out, spec_from_model(model, theta, fit=prov, dt=rec.dt), force=args.force))
     report_path = None
     if args.report:
@@ -137,9 +145,10 @@ def run(args: argparse.Namespace) -> int:
         obj["data"] = rec.source
         obj["report"] = report_path
         obj["params_file"] = out_path
+        obj["admissibility"] = _clean(adm.to_json())
         print(json.dumps(obj, allow_nan=False))
     else:
-        print(_text(d, rec.source))
+        print(_text(d, rec.source, adm))
         if report_path:
             print(f"report: {report_path}")
         if out_path:
