@@ -121,8 +121,9 @@ def run(args: argparse.Namespace) -> int:
         from ..io import spec_from_model, write_params
         best = d.ladder[-1]
         model, theta = d.models[best.model]
+        from ..identify.input_range import identified_range
         prov = {"method": "diagnose", "rmse": best.rmse, "rmse_train": best.rmse_train, "data": str(args.data),
-                "controllers": adm.controllers}
+                "controllers": adm.controllers, **identified_range(rec.u)}
         out_path = str(write_params(args.out, spec_from_model(model, theta, fit=prov, dt=rec.dt), force=args.force))
     report_path = None
     if args.report:

@@ -213,6 +213,8 @@ def run(args) -> int:
         if args.seed is not None:
             prov["seed"] = args.seed
         prov["controllers"] = adm.controllers
+        from ..identify.input_range import identified_range
+        prov.update(identified_range(rec.u))
         if constrained:
             prov["admissible"] = f"Remark 4.1 enforced; the free fit validated at {constrained['free_rmse']:.4g} m"
         write_params(out, spec_from_model(model, res.theta, fit=prov, dt=rec.dt), force=args.force)
