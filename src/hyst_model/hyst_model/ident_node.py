@@ -92,6 +92,7 @@ class IdentConfig:
 def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     """Fit ``cfg.model`` (+ effects) to one bag; returns ``(summary, model, result, dt)``. Pure: no ROS."""
     from .identify import fit
+    from .identify.input_range import identified_range
     from .io import read_state_bag, regularise
     from .models import data_config
     from .spec import build_model
@@ -104,7 +105,7 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
               split=cfg.val_fraction if cfg.val_fraction > 0 else None)
     summary = {"bag": str(path), "model": cfg.model, "effects": list(cfg.effects), "method": cfg.method,
                "rmse": res.rmse, "rmse_train": res.rmse_train, "seconds": res.seconds, "samples": len(rec),
-               "params": res.params, "dt": rec.dt, "data_notes": notes}
+               "params": res.params, "dt": rec.dt, "data_notes": notes, **identified_range(rec.u)}
     return summary, model, res, rec.dt
 
 
@@ -293,7 +294,8 @@ class IdentNode(AtomicParametersNode):
             from .io import spec_from_model, write_params
             target = os.path.abspath(cfg.params_file)
             force = cfg.overwrite or target in self._written_by_me
-            prov = {"method": cfg.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": summary["bag"]}
+            prov = {"method": cfg.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": summary["bag"],
+                    **{k: summary[k] for k in ("u_min", "u_max") if k in summary}}
             try:
                 write_params(target, spec_from_model(model, res.theta, fit=prov, dt=dt), force=force)
                 self._written_by_me.add(target)

@@ -164,6 +164,7 @@ def test_lockstep_and_gappy_bags_are_fitted_as_they_are(tmp_path):
     assert summary["samples"] == n and dt == pytest.approx(5e-4)
     assert any("collapsed 3" in s for s in summary["data_notes"])
     assert any("bridged 1 gap" in s for s in summary["data_notes"])
+    assert (summary["u_min"], summary["u_max"]) == (pytest.approx(u.min()), pytest.approx(u.max()))  # → params file
     assert res.rmse < 5e-9
     from hyst_model.errors import DataError
     with pytest.raises(DataError, match="--gaps auto"):
