@@ -37,10 +37,10 @@ def range_note(fit: Mapping, u, tolerance: float = TOLERANCE) -> str | None:
     if not u.size:
         return None
     slack = tolerance * max(float(hi) - float(lo), 1e-12)
-    below, above = float(np.min(u)) < lo - slack, float(np.max(u)) > hi + slack
-    if not (below or above):
+    beyond = (u < lo - slack) | (u > hi + slack)
+    if not beyond.any():
         return None
-    share = float(np.mean((u < lo - slack) | (u > hi + slack)))
+    share = float(np.mean(beyond))
     return (f"the input reaches {np.min(u):.4g} .. {np.max(u):.4g} V, outside the {lo:.4g} .. {hi:.4g} V the model "
             f"was identified on ({share:.0%} of the samples): it extrapolates there and may be far off or diverge; "
             "identify it on a record that covers this range")
