@@ -21,8 +21,8 @@ from ..errors import EffectError, FitError
 from ..model import Model
 from .ladder import effect_order
 from .parallel import pmap
-from .refit import _simulate, guarded_refit, paired_t, rmse
-from .stages import Rung, Setup
+from .refit import _simulate, paired_t, rmse
+from .stages import Rung, Setup, refit_from_final
 
 __all__ = ["prune"]
 
@@ -51,10 +51,7 @@ def prune(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], c
             rest = [k for k in applied if k != nm]
             start = {k: v for k, v in values.items() if not k.startswith(nm + ".")}  # the final point without nm
             try:
-                mm, th, yh = guarded_refit(own.base_model, rest, own.cfg, t, u, y, val, start,
-                                           theta_base=full_c.split(th_full)[0],
-                                           carry={k: v for k, v in start.items() if "." in k},
-                                           fitter=own.fit, two_stage=False)
+                mm, th, yh = refit_from_final(own, rest, start, full_c, th_full, two_stage=False)
             except (EffectError, FitError):
                 return None
             e = y - yh

@@ -23,7 +23,7 @@ from .parallel import pmap
 from .unexplained import Unexplained, explain_unexplained
 
 __all__ = ["Candidate", "Rung", "Setup", "screen_on", "screen_all", "refit_all", "rebase", "verdict",
-           "effect_variants", "own_config"]
+           "effect_variants", "own_config", "refit_from_final"]
 
 
 @dataclass
@@ -113,6 +113,17 @@ class Setup:
     @property
     def at_floor(self) -> bool:
         return self.base_val <= self.noise_margin * self.noise
+
+
+def refit_from_final(s: Setup, names: list, start: dict, final: ComposedModel, th_final: np.ndarray, **kw):
+    """The effects ``names`` refitted jointly with the base from the point ``start`` (named values: the final
+    model's, changed), never worse on validation than that point (:func:`guarded_refit`); the base starts from the
+    final model's base parameters and every effect value in ``start`` is carried. The after-the-ladder steps
+    (:mod:`.prune`, :mod:`.swap`) refit this way; ``kw`` goes to :func:`guarded_refit` (``two_stage``, ``prior``).
+    """
+    return guarded_refit(s.base_model, names, s.cfg, s.t, s.u, s.y, s.val, start,
+                         theta_base=final.split(th_final)[0], carry={k: v for k, v in start.items() if "." in k},
+                         fitter=s.fit, **kw)
 
 
 def screen_on(s: Setup, inner: Model, th_inner: np.ndarray, chosen: list, nm: str, prior: dict | None):

@@ -24,8 +24,8 @@ from ..errors import EffectError, FitError
 from ..model import Model
 from .ladder import effect_order
 from .parallel import pmap
-from .refit import _effect_values, _simulate, guarded_refit, paired_t, rmse
-from .stages import Rung, Setup, own_config
+from .refit import _effect_values, _simulate, paired_t, rmse
+from .stages import Rung, Setup, own_config, refit_from_final
 
 __all__ = ["swap", "alone_significant"]
 
@@ -72,10 +72,7 @@ def swap(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], ch
         alt_vals = _effect_values(m_alt, th_alt, a)
         start = {**{x: v for x, v in values.items() if not x.startswith(k + ".")}, **alt_vals}
         try:
-            mm, th, yh = guarded_refit(own.base_model, names, own.cfg, t, u, y, val, start,
-                                       theta_base=full_c.split(th_full)[0],
-                                       carry={x: v for x, v in start.items() if "." in x},
-                                       fitter=own.fit, prior=alt_vals)
+            mm, th, yh = refit_from_final(own, names, start, full_c, th_full, prior=alt_vals)
         except (EffectError, FitError):
             return None
         e = y - yh
