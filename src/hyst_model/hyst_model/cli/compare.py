@@ -68,11 +68,12 @@ def _window(text: str | None) -> tuple[float, float]:
 
 
 def compare_record(record, model, theta, *, n_levels: int = 5, max_lag: int = 25,
-                   window: tuple[float, float] = (-np.inf, np.inf)):
+                   window: tuple[float, float] = (-np.inf, np.inf), diverges_why: str | None = None):
     """Model output and :class:`~hyst_model.diagnose.stats.CompareStats` of ``model`` at ``theta`` on ``record``.
 
     The model runs over the whole record (a hysteretic state depends on the input history) in simulation mode;
     only samples with ``window[0] <= t < window[1]`` are scored. Returns ``(scored_record, yhat, stats)``.
+    ``diverges_why`` replaces the generic question in the divergence error (e.g. the input range note).
 
     Raises
     ------
@@ -95,8 +96,8 @@ def compare_record(record, model, theta, *, n_levels: int = 5, max_lag: int = 25
     yhat = yhat[m]
     if not np.all(np.isfinite(yhat)):
         k = int(np.flatnonzero(~np.isfinite(yhat))[0])
-        raise HystError(f"the model diverges on this input (non-finite output from t={rec.t[k]:.4g} s); "
-                        "was it fitted on a comparable input range and sample rate?")
+        why = diverges_why or "was it fitted on a comparable input range and sample rate?"
+        raise HystError(f"the model diverges on this input (non-finite output from t={rec.t[k]:.4g} s); {why}")
     try:
         st = compare_stats(rec.t, rec.u, rec.y, yhat, n_levels=n_levels, max_lag=max_lag)
     except ValueError as err:
@@ -177,12 +178,8 @@ def run(args: argparse.Namespace) -> int:
     far = range_note(spec.fit, rec.u)
     if far:
         notes.append(f"note: {far}")
-    try:
-        rec, yhat, st = compare_record(rec, model, theta, n_levels=args.levels, max_lag=args.lags, window=window)
-    except HystError as err:
-        if far and "diverges" in str(err):
-            raise HystError(f"{err}: {far}") from err
-        raise
+    rec, yhat, st = compare_record(rec, model, theta, n_levels=args.levels, max_lag=args.lags, window=window,
+                                   diverges_why=far)
     report_dir = None
     if args.report:
         from ..diagnose.report import write_report
