@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import DataError, EffectError, FitError
 from ..effects import EFFECTS, compose
+from ..effects.compose import around_effects
 from ..effects.base import ComposedModel
 from ..model import Model
 
@@ -123,15 +124,12 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
         lo, hi = m.bounds
         th0 = np.clip(th0, lo, hi)
     th1 = th0
-    inputs = [(e, te) for e, te in zip(m.effects, m.split(th0)[1]) if e.kind == "input"]
-    if two_stage and inputs:
-        # The base around the input effects at their start: the base alone on the transformed input, with
-        # the base model's own fast fitter (equation-error starts, exact Jacobian).
-        uu = u
-        for e, te in inputs:
-            uu = e.input(te, t, uu)
+    uu, yy = around_effects(m, th0, t, u, y)
+    if two_stage and (uu is not u or yy is not y):
+        # The base around the effects at their start: the base alone on the transformed input and the undone
+        # output, with the base model's own fast fitter (equation-error starts, exact Jacobian).
         th1 = th0.copy()
-        th1[: len(base_model.names)] = fitter(base_model, t, uu, y, None)
+        th1[: len(base_model.names)] = fitter(base_model, t, uu, yy, None)
     th = fitter(m, t, u, y, th1)
     return m, th, _simulate(m, th, t, u)
 

@@ -141,6 +141,12 @@ class Effect:
         """Output-side effects: the measured output (m) given the inner model's output ``y``."""
         return y
 
+    def undo_output(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray, y: np.ndarray) -> np.ndarray | None:
+        """Output-side effects: the inner model's output that gives the measured ``y``, where the effect can be
+        undone on a record (a delay: the record advanced); None where it cannot (default). The fitters refit the
+        base on it at the effect's start, as they refit it on the transformed input for input-side effects."""
+        return None
+
     def apply(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray, inner: Inner) -> np.ndarray:
         """Output of the extended structure for local parameters ``theta``.
 

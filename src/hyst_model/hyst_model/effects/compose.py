@@ -16,7 +16,7 @@ from ..errors import EffectError
 from ..model import Model, Param
 from .base import ComposedModel, Effect, Inner
 
-__all__ = ["EFFECTS", "compose", "register", "effect_names", "Frozen", "effects_data_config"]
+__all__ = ["EFFECTS", "compose", "register", "effect_names", "Frozen", "effects_data_config", "around_effects"]
 
 #: name → Effect subclass. Filled by :func:`_load_builtins` at import and by :func:`register`.
 EFFECTS: dict[str, type[Effect]] = {}
@@ -150,3 +150,30 @@ def effects_data_config(names: Sequence[str], t: np.ndarray, u: np.ndarray, y: n
             raise EffectError(f"unknown effect {n!r}; choose from {', '.join(sorted(EFFECTS))}")
         out.update(EFFECTS[n].data_config(t, u, y, scored) or {})
     return out
+
+
+def around_effects(m: ComposedModel, theta: np.ndarray, t, u, y) -> tuple[np.ndarray, np.ndarray]:
+    """The input and output the base of ``m`` sees at ``theta``: ``u`` through the input-side effects, and ``y``
+    with the outermost output-side effects undone as far as they can be (:meth:`Effect.undo_output`, outermost
+    first, stopping at the first that cannot). The same objects when no effect changes them.
+
+    A base fitted to the record as it is has imitated the effects (its δ terms lag like a delay on either side),
+    and a joint fit from there stays in that basin: the fitters refit the base on these first
+    (:func:`hyst_model.diagnose.refit.refit`, :meth:`hyst_model.identify.fast.FastFit._data_start`).
+    """
+    parts = m.split(theta)[1]
+    uu = u
+    for e, te in zip(m.effects, parts):
+        if e.kind == "input":
+            uu = e.input(te, t, uu)
+    yy = y
+    for e, te in reversed(list(zip(m.effects, parts))):
+        if e.kind == "input":
+            continue
+        if e.kind != "output":
+            break
+        back = e.undo_output(te, t, u, yy)
+        if back is None:
+            break
+        yy = np.asarray(back, dtype=np.float64)
+    return uu, yy

@@ -38,7 +38,7 @@ from .lm import LMResult, bounded_lm
 from .memo import FitMemo, content_key
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
-    from ..effects.base import Effect
+    from ..effects.base import ComposedModel, Effect
 
 __all__ = ["FastFit", "equation_error_starts", "DELTA2_GRID"]
 
@@ -349,18 +349,20 @@ class FastFit(Estimator):
 
     def _data_start(self, problem: TrainProblem, model: _Extended, base: MBWModel,
                     th_base: np.ndarray) -> np.ndarray:
-        """Effects' data-driven start on the training data; for input-side effects (delay) the base is refitted
-        on the input as the effects transform it there — a base fitted without the effect imitates it (its δ
-        terms mimic a delay) and the joint fit stalls in that basin (the same steps as ``hyst diagnose``)."""
+        """Effects' data-driven start on the training data; where effects transform the input (delay) or can be
+        undone on the output (an output-side delay) the base is refitted on the input and output as it sees them
+        there (:func:`~hyst_model.effects.compose.around_effects`) — a base fitted without the effect imitates it
+        (its δ terms mimic a delay) and the joint fit stalls in that basin (the same steps as ``hyst diagnose``)."""
+        from ..effects.compose import around_effects  # late: effects import the models this module fits
         with np.errstate(all="ignore"):
             th = np.asarray(model.start(problem.t, problem.u, problem.y_full, th_base), dtype=np.float64)
-        inputs = [(e, te) for e, te in zip(model.effects, model.split(th)[1]) if e.kind == "input"]
-        if inputs:
-            uu = problem.u
-            for e, te in inputs:
-                uu = e.input(te, problem.t, uu)
+        uu, yy = around_effects(cast("ComposedModel", model), th, problem.t, problem.u, problem.y_full)
+        if uu is not problem.u or yy is not problem.y_full:
             bp = problem.for_model(base)
             bp.u = np.asarray(uu, dtype=np.float64)
+            if yy is not problem.y_full:
+                bp.y_full = np.asarray(yy, dtype=np.float64)
+                bp.y = bp.y_full[bp.a:] if bp.keep is None else np.where(bp.keep, bp.y_full[bp.a:], np.nan)
             refit = self._fit_base(bp, base)
             problem.n_eval += bp.n_eval
             if refit is not None:
