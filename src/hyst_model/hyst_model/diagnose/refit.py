@@ -124,8 +124,8 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
         lo, hi = m.bounds
         th0 = np.clip(th0, lo, hi)
     th1 = th0
-    uu, yy = around_effects(m, th0, t, u, y)
-    if two_stage and (uu is not u or yy is not y):
+    uu, yy = around_effects(m, th0, t, u, y) if two_stage else (u, y)
+    if uu is not u or yy is not y:
         # The base around the effects at their start: the base alone on the transformed input and the undone
         # output, with the base model's own fast fitter (equation-error starts, exact Jacobian).
         th1 = th0.copy()
