@@ -47,14 +47,13 @@ class TrainProblem:
     def __init__(self, model: Model, t: np.ndarray, u: np.ndarray, y: np.ndarray, split: Split):
         self.t = t[:split.train_stop]
         self.u = u[:split.train_stop]
-        self.y = y[split.train_start:split.train_stop]
         self.y_full = y[:split.train_stop]  # for starts that look at the data before the scored window
         self.a = split.train_start
         # interleaved hold-out: masked samples are simulated (the state runs through them) but never scored;
         # the target is NaN there, which the fused MBW normal equations skip
         self.keep = None if split.val_mask is None else ~split.val_mask[split.train_start:split.train_stop]
+        self.y = self.scored_target(self.y_full)
         if self.keep is not None:
-            self.y = np.where(self.keep, self.y, np.nan)
             # starts (equation error, effects' data-driven starts) see held-out samples bridged linearly
             kk = np.ones(self.y_full.size, dtype=bool)
             kk[self.a:] = self.keep
@@ -62,6 +61,12 @@ class TrainProblem:
             self.y_full = np.where(kk, self.y_full, np.interp(idx, idx[kk], self.y_full[kk]))
         self.scale = float(np.std(self._kept(self.y))) or 1.0
         self._bind(model)
+
+    def scored_target(self, y_full: np.ndarray) -> np.ndarray:
+        """The training target from an output over the whole window (``y_full``'s shape): from the scored window's
+        start, NaN where the interleaved hold-out is, as :attr:`y` holds it."""
+        y = np.asarray(y_full, dtype=np.float64)[self.a:]
+        return y if self.keep is None else np.where(self.keep, y, np.nan)
 
     def _kept(self, a: np.ndarray) -> np.ndarray:
         """The scored rows of a per-sample array (all of them without an interleaved hold-out)."""

@@ -362,7 +362,7 @@ class FastFit(Estimator):
             bp.u = np.asarray(uu, dtype=np.float64)
             if yy is not problem.y_full:
                 bp.y_full = np.asarray(yy, dtype=np.float64)
-                bp.y = bp.y_full[bp.a:] if bp.keep is None else np.where(bp.keep, bp.y_full[bp.a:], np.nan)
+                bp.y = bp.scored_target(bp.y_full)
             refit = self._fit_base(bp, base)
             problem.n_eval += bp.n_eval
             if refit is not None:
