@@ -31,7 +31,7 @@ from ..errors import EffectError
 from ..model import Param
 from .base import Effect
 from .online import OnlineEffect
-from .signals import corr
+from .signals import corr, midrange
 
 __all__ = ["Asymmetry", "AsymmetryInverse", "KinkInverse", "FORMS"]
 
@@ -92,8 +92,8 @@ class Asymmetry(Effect):
         """
         u = np.asarray(u, float)
         yy = np.asarray(y, float)
-        out = {"asymmetry.u_c": 0.5 * (float(np.min(u)) + float(np.max(u))),
-               "asymmetry.y_c": 0.5 * (float(np.min(yy)) + float(np.max(yy)))} if u.size and yy.size else {}
+        out = {"asymmetry.u_c": midrange(u),
+               "asymmetry.y_c": midrange(yy)} if u.size and yy.size else {}
         ys = yy[np.asarray(scored, bool)]
         if ys.size:
             out.update({"asymmetry.y_lo": float(np.min(ys)), "asymmetry.y_hi": float(np.max(ys))})
@@ -138,9 +138,9 @@ class Asymmetry(Effect):
         # Centre on the data (unless the configuration holds the centres: :meth:`data_config`), then regress the
         # residual on the even input term.
         if "asymmetry.u_c" not in self._config:
-            self.u_c = 0.5 * (float(np.min(u)) + float(np.max(u)))
+            self.u_c = midrange(u)
         if "asymmetry.y_c" not in self._config:
-            self.y_c = 0.5 * (float(np.min(y)) + float(np.max(y)))
+            self.y_c = midrange(y)
         q = ((np.asarray(u, float) - self.u_c) / self.u_scale) ** 2
         q = q - q.mean()
         den = float(q @ q)
@@ -168,7 +168,7 @@ class Asymmetry(Effect):
         return best[1]
 
     def signature(self, t, u, residual, dt):
-        uc = 0.5 * (float(np.min(u)) + float(np.max(u)))
+        uc = midrange(u)
         q = (np.asarray(u, float) - uc) ** 2
         c = corr(residual, q)
         c_odd = corr(residual, np.asarray(u, float) - uc)

@@ -30,7 +30,7 @@ import numpy as np
 from ..model import Param
 from .base import Effect
 from .online import OnlineEffect
-from .signals import corr
+from .signals import corr, midrange
 
 __all__ = ["Saturation", "SaturationInverse", "soft_limit", "knee_width"]
 
@@ -126,7 +126,7 @@ class Saturation(Effect):
         return best[1] or shaped[1]
 
     def signature(self, t, u, residual, dt):
-        uc = 0.5 * (float(np.min(u)) + float(np.max(u)))
+        uc = midrange(u)
         x = np.asarray(u, float) - uc
         xn = x / max(float(np.max(np.abs(x))), 1e-300)
         top = np.clip(xn - 0.5, 0.0, None) ** 2

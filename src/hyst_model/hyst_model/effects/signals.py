@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["sample_time", "holds", "noise_floor", "smooth", "rate_of", "corr", "fmt_len"]
+__all__ = ["sample_time", "holds", "noise_floor", "smooth", "rate_of", "midrange", "corr", "fmt_len"]
 
 
 _LAST_T: list = [None]  # one (time vector, its fingerprint, period) tuple; the vector kept alive keeps its id
@@ -88,6 +88,12 @@ def rate_of(x: np.ndarray, dt: float, smooth_seconds: float = 0.0) -> np.ndarray
     """Time derivative (unit/s), optionally of a smoothed copy."""
     xs = smooth(x, int(round(smooth_seconds / dt))) if smooth_seconds > 0 else np.asarray(x, dtype=np.float64)
     return np.gradient(xs, dt)
+
+
+def midrange(x) -> float:
+    """The middle of the range of ``x``: (min + max) / 2 — where the even-order effects centre their terms."""
+    x = np.asarray(x, dtype=np.float64)
+    return 0.5 * (float(np.min(x)) + float(np.max(x)))
 
 
 def corr(a: np.ndarray, b: np.ndarray) -> float:
