@@ -65,7 +65,7 @@ def run_case(args: tuple) -> dict:
         try:
             from hyst_model.diagnose.diagnose import _scales  # same config as diagnose
             cfg = dict(_scales(c.u, c.y), dt=float(c.t[1] - c.t[0]))
-            cfg["drift.span"] = float(c.t[~validation_mask(c.t.size)][-1] - c.t[0])
+            cfg["drift.span"] = float(c.t[~validation_mask(c.t.size, c.u)][-1] - c.t[0])
             m, th, _ = refit(bm, lib, cfg, c.t, c.u, c.y, bth)
             out["fresh_true"] = _rmse((c.y_fresh - m.simulate(th, c.t_fresh, c.u_fresh))[warm:])
         except Exception as err:  # noqa: BLE001 - a case that cannot be refit is reported, not fatal

@@ -76,3 +76,20 @@ def test_candidates_are_judged_again_once_the_base_left_a_poor_basin():
     d = diagnose(c.t, c.u, c.y)
     assert d.missing == "dynamics", d.explanation
     assert d.ladder[-1].rmse < 0.7 * d.baseline_rmse, d.explanation
+
+
+def test_a_steps_record_is_validated_on_some_of_its_steps():
+    """Generated GMA stage, 8 steps with holds and a lightly damped mode ringing after each (development family
+    11, found by its fresh-record column): the unshifted hold-out blocks held none of the steps, so the base
+    validated at 1.02× the noise floor (training 10.6×) and the answer was 'none' while the base missed the fresh
+    record by 13×. With the blocks placed on a fair share of the input's changes (identify.result.block_phase),
+    the mode is found and cuts the validation error."""
+    import numpy as np
+    from hyst_model.diagnose.diagnose import diagnose
+    from hyst_model.identify import block_mask
+    from hyst_sim.generator import generate_case
+    c = generate_case(1100087, "single_large")
+    assert not np.any(block_mask(c.t.size)[1:][np.abs(np.diff(c.u)) > 0])  # the case: no step validated
+    d = diagnose(c.t, c.u, c.y)
+    assert d.missing == "dynamics", d.explanation
+    assert d.ladder[-1].rmse < 0.3 * d.baseline_rmse, d.explanation

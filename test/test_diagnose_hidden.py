@@ -114,7 +114,7 @@ def test_cli_json_is_one_object_best_first_and_out_saves_the_best_rung(capsys, t
     rec = load_record(BAGS / "creep")
     e = rec.y - model.simulate(spec.theta(model), rec.t, rec.u)
     from hyst_model.diagnose.diagnose import validation_mask
-    val = validation_mask(rec.t.size)
+    val = validation_mask(rec.t.size, rec.u)
     assert model.name == "mbw+creep"
     assert np.sqrt(np.mean(e[val] ** 2)) == pytest.approx(obj["ladder"][-1]["rmse"], rel=1e-6)
 

@@ -18,7 +18,7 @@ def test_base_fit_reaches_the_noise_floor_on_mbw_truths(seed):
     cfg = dict(_scales(c.u, c.y), dt=float(c.t[1] - c.t[0]))
     m = build_model("mbw", (), cfg)
     th = default_fitter(m, c.t, c.u, c.y, None)
-    val = validation_mask(c.t.size)
+    val = validation_mask(c.t.size, c.u)
     e = (c.y - m.simulate(th, c.t, c.u))[val]
     assert np.sqrt(np.mean(e * e)) < 1.3 * c.noise, f"split {SPLIT}"
 
@@ -33,7 +33,7 @@ def test_every_start_is_probed_before_the_best_go_on(seed, monkeypatch):
     c = generate_case(seed, "none")
     cfg = dict(_scales(c.u, c.y), dt=float(c.t[1] - c.t[0]))
     m = build_model("mbw", (), cfg)
-    val = validation_mask(c.t.size)
+    val = validation_mask(c.t.size, c.u)
 
     def err() -> float:
         monkeypatch.setattr(FastFit, "SOLVES", FitMemo(16))  # no fit remembered from the other run
@@ -64,7 +64,7 @@ def test_interleaved_hold_out_is_never_scored_in_training():
     c = generate_case(100009, "none")
     cfg = dict(_scales(c.u, c.y), dt=float(c.t[1] - c.t[0]))
     m = build_model("mbw", (), cfg)
-    mask = block_mask(c.t.size, 0.25, 8)
+    mask = block_mask(c.t.size, 0.25, 8, c.u)
     assert mask[-1] and not mask[0] and abs(mask.mean() - 0.25) < 0.01
     y2 = c.y.copy()
     y2[mask] += 5e-6

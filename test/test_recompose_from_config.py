@@ -20,7 +20,7 @@ NAMES = [n for n in sorted(EFFECTS) if n != "rate"]  # rate extends the BW base 
 def fitted_base():
     c = generate_case(1100169, "single_large")  # a unipolar piezo record: centres far from zero
     t, u, y = c.t[:6000], c.u[:6000], c.y[:6000]
-    val = validation_mask(t.size)
+    val = validation_mask(t.size, u)
     cfg = dict(_scales(u, y), dt=float(t[1] - t[0]))
     base = build_model("mbw", (), cfg)
     cfg.update(effects_data_config(NAMES, t, u, y, ~val))

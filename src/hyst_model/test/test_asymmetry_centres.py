@@ -28,7 +28,7 @@ def _record(seed: int = 5):
 
 def test_data_config_holds_the_centres_and_start_keeps_configured_ones():
     t, u, y = _record()
-    val = validation_mask(t.size)
+    val = validation_mask(t.size, u)
     dc = Asymmetry.data_config(t, u, y, ~val)
     assert dc["asymmetry.u_c"] == pytest.approx(0.5 * (u.min() + u.max()))
     assert dc["asymmetry.y_c"] == pytest.approx(0.5 * (y.min() + y.max()))
@@ -43,7 +43,7 @@ def test_data_config_holds_the_centres_and_start_keeps_configured_ones():
 
 def test_a_rung_composed_again_from_the_configuration_reproduces_itself_and_the_guard_never_goes_back():
     t, u, y = _record()
-    val = validation_mask(t.size)
+    val = validation_mask(t.size, u)
     cfg = dict(_scales(u, y), dt=1e-3)
     base = build_model("mbw", (), cfg)
     cfg.update(effects_data_config(["asymmetry", "drift"], t, u, y, ~val))

@@ -32,7 +32,7 @@ def _record():
 
 
 def _setup(t, u, y) -> Setup:
-    val = validation_mask(t.size)
+    val = validation_mask(t.size, u)
     base = build_model("mbw", (), CFG)
     cfg = dict(CFG)
     cfg.update(effects_data_config(["dynamics"], t, u, y, ~val))

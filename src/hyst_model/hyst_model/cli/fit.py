@@ -160,7 +160,7 @@ def run(args) -> int:
     if isinstance(split, tuple) and split[0] == "blocks":
         from ..identify import block_mask
         from ..diagnose.diagnose import BLOCKS
-        split = block_mask(len(rec), float(split[1]), BLOCKS)  # the same hold-out as hyst diagnose
+        split = block_mask(len(rec), float(split[1]), BLOCKS, rec.u)  # the same hold-out as hyst diagnose
     config = data_config(rec.u, rec.y)
     config["dt"] = rec.dt
     if args.model in ("mbw", "bw"):

@@ -156,7 +156,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     if n < need:
         raise FitError(f"too little data for validation: {n} samples; diagnose holds out "
                        f"{SPLIT:.0%} in {BLOCKS} blocks and needs at least {need} samples")
-    val = validation_mask(n)
+    val = validation_mask(n, u)
     train = ~val
     fit_ = fitter or default_fitter
     dt = sample_time(t)

@@ -31,16 +31,17 @@ BLOCKS = 8
 
 
 
-def validation_mask(n: int) -> np.ndarray:
+def validation_mask(n: int, u: np.ndarray | None = None) -> np.ndarray:
     """True on the held-out validation samples: :data:`SPLIT` of the record in :data:`BLOCKS` interleaved blocks.
 
     A tail hold-out validates only what the record does last — the highest frequencies of a sweep, the
     smallest triangles, one sine — so a model fitted on the rest must extrapolate there, and an effect that
     shows only elsewhere is never seen in validation. Interleaved blocks (:func:`hyst_model.identify.block_mask`)
-    sample every part of the excitation; the fit never scores them (``split=mask``).
+    sample every part of the excitation; the fit never scores them (``split=mask``). With the input ``u`` (as
+    diagnose and ``hyst fit`` pass it) the blocks are placed to hold a fair share of its changes.
     """
     from ..identify.result import block_mask
-    return block_mask(n, SPLIT, BLOCKS)
+    return block_mask(n, SPLIT, BLOCKS, u)
 
 
 def rmse(e: np.ndarray) -> float:
@@ -82,7 +83,10 @@ def default_fitter(model: Model, t, u, y, theta0: np.ndarray | None) -> np.ndarr
     split, so validation numbers match ``hyst fit``.
     """
     from .. import identify  # late: identification imports models; keep diagnose importable on its own
-    split = validation_mask(np.asarray(t).size)
+    # The input the fitter is given: the record's, or (the base refitted around input-side effects) that input
+    # through them, whose changes are the record's moved by a few samples — the same blocks but for a share on
+    # the very edge of block_phase's band, and then only the start of the joint fit trains on the other grid.
+    split = validation_mask(np.asarray(t).size, np.asarray(u, dtype=np.float64))
     if theta0 is None:
         res = identify.fit(model, t, u, y, method="fast", split=split)
     else:

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import FitError
 
-__all__ = ["Split", "make_split", "block_mask", "FitResult", "rmse"]
+__all__ = ["Split", "make_split", "block_mask", "block_phase", "FitResult", "rmse"]
 
 
 def rmse(a: np.ndarray) -> float:
@@ -66,20 +66,61 @@ class Split:
         return slice(self.val_start, self.val_stop)
 
 
-def block_mask(n: int, fraction: float = 0.25, blocks: int = 8) -> np.ndarray:
+def block_mask(n: int, fraction: float = 0.25, blocks: int = 8, u: np.ndarray | None = None) -> np.ndarray:
     """Validation mask of ``blocks`` interleaved blocks holding ``fraction`` of ``n`` samples.
 
     Block j is the last ``fraction`` of the j-th of ``blocks`` equal segments, so the first samples (the start
     from rest) always train and the record's tail is validated as with a tail split.
+
+    With the input ``u``, the blocks are shifted together (by :func:`block_phase`) where that grid would give the
+    validation less than half or more than twice its share of the input's changes. A record that moves in a few
+    events (steps with holds) can otherwise have every event in training: generated GMA stage 1100087 (8 steps,
+    a lightly damped mode ringing after each) had none in a validation block, so the base validated at 1.02× the
+    noise floor while its training error was 10.6× and no effect could improve validation. Records whose input
+    moves throughout (sines, noise, sweeps, triangles) keep the unshifted grid.
     """
     if not 0.0 < fraction < 1.0 or blocks < 1:
         raise FitError(f"block_mask needs 0 < fraction < 1 and blocks >= 1, got {fraction}, {blocks}")
-    m = np.zeros(int(n), dtype=bool)
+    shift = 0.0 if u is None else block_phase(np.asarray(u, dtype=np.float64), fraction, blocks)
+    return _blocks(int(n), fraction, blocks, shift)
+
+
+def _blocks(n: int, fraction: float, blocks: int, shift: float) -> np.ndarray:
+    m = np.zeros(n, dtype=bool)
     edges = np.linspace(0, n, blocks + 1)
     for j in range(blocks):
         a, b = edges[j], edges[j + 1]
-        m[int(round(b - fraction * (b - a))):int(round(b))] = True
+        m[int(round(b - fraction * (b - a) - shift)):int(round(b - shift))] = True
     return m
+
+
+def block_phase(u: np.ndarray, fraction: float = 0.25, blocks: int = 8) -> float:
+    """Samples by which :func:`block_mask` shifts its blocks earlier so they hold a fair share of ``u``'s changes.
+
+    Each change |Δu| counts for the quarter block after it (what a step excites follows it). The unshifted grid
+    is kept while the blocks hold between half and twice ``fraction`` of that activity; otherwise the shift, in
+    half blocks up to half a segment (the record's first ``fraction`` of a segment always trains), whose share is
+    closest to ``fraction`` (on a log scale; the smaller shift on a tie). Depends on the input only, never on the
+    output, so the hold-out stays blind to what is fitted.
+    """
+    n = u.size
+    a = np.abs(np.diff(u, prepend=u[0] if n else 0.0))
+    seg = n / blocks
+    width = max(1, int(round(fraction * seg / 4)))
+    act = np.convolve(a, np.ones(width))[:n]
+    total = float(act.sum())
+    if n == 0 or total <= 0.0:
+        return 0.0
+
+    def share(shift: float) -> float:
+        return float(act[_blocks(n, fraction, blocks, shift)].sum()) / total
+
+    if 0.5 * fraction <= share(0.0) <= 2.0 * fraction:
+        return 0.0
+    step = 0.5 * fraction * seg
+    shifts = [k * step for k in range(int(np.floor((1.0 - 2.0 * fraction) * seg / step + 1e-9)) + 1)]
+    miss = [abs(np.log(max(share(s), 1e-12) / fraction)) for s in shifts]
+    return shifts[int(np.argmin(miss))]
 
 
 def make_split(t: np.ndarray, split) -> Split:
