@@ -6,10 +6,10 @@ stage 20 % off the profile's default (``stage20``: ζ1, ζ2 +20 %, ψ and α −
 after identification (``mismatch20``: the laws' robustness, not compensation): play the open-loop identification
 excitation (``hyst_control.excitation``, what ``hyst_excite_node`` plays) on the simulated stage at 2 kHz, run
 ``hyst diagnose``'s engine on the record, then track sine 1/10/30 Hz, steps and C1–C3 with DPPC, DMRAC, PID and
-the open-loop inverse (feedforward), each with the base model of the diagnosis and with its final (extended) model, whose effects the controllers compensate
-(``hyst_control.compensation``; an identified resonance is not compensated, the gains are checked against it and
-derated as the controller node does, ``hyst_control.stability``). The tracking runs on a fresh stage (other noise
-seed). RMSE in nm (steps: the 50 ms after the step left out, as ``bench_tracking``).
+the open-loop inverse (feedforward), each with the base model of the diagnosis and with its final (extended)
+model, whose effects the controllers compensate (``hyst_control.compensation``; an identified resonance is not
+compensated, the gains are checked against it and derated as the controller node does, ``hyst_control.stability``).
+The tracking runs on a fresh stage (other noise seed). RMSE in nm (steps: the 50 ms after the step left out, as ``bench_tracking``).
 
 Usage: ``python bench/bench_robust_tracking.py [--scenarios none,creep] [--seconds 2]``; ``make bench`` runs it.
 """
