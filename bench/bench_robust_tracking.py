@@ -9,7 +9,8 @@ excitation (``hyst_control.excitation``, what ``hyst_excite_node`` plays) on the
 the open-loop inverse (feedforward), each with the base model of the diagnosis and with its final (extended)
 model, whose effects the controllers compensate (``hyst_control.compensation``; an identified resonance is not
 compensated, the gains are checked against it and derated as the controller node does, ``hyst_control.stability``).
-The tracking runs on a fresh stage (other noise seed). RMSE in nm (steps: the 50 ms after the step left out, as ``bench_tracking``).
+The tracking runs on a fresh stage (other noise seed). RMSE in nm (steps: the 50 ms after the step left out, as
+``bench_tracking``).
 
 Usage: ``python bench/bench_robust_tracking.py [--scenarios none,creep] [--seconds 2]``; ``make bench`` runs it.
 """
