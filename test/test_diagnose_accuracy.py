@@ -93,3 +93,16 @@ def test_a_steps_record_is_validated_on_some_of_its_steps():
     d = diagnose(c.t, c.u, c.y)
     assert d.missing == "dynamics", d.explanation
     assert d.ladder[-1].rmse < 0.3 * d.baseline_rmse, d.explanation
+
+
+def test_a_rung_screens_each_effect_from_its_own_start_too():
+    """Generated GMA stage, a gain kink and a soft two-sided limit (development family 11): the limit alone on the
+    base ended 285 µm below the stroke, and those values, carried onto the kink's rung as the screen's start, gave
+    no gradient — the screen stayed at the rung's 37.1 nm and the limit was never taken. Screened from the rung's
+    own start as well (stages.screen_on keeps the better), the kink + limit reach 1.2× the noise floor."""
+    from hyst_model.diagnose.diagnose import diagnose
+    from hyst_sim.generator import generate_case
+    c = generate_case(1100030, "pair")
+    d = diagnose(c.t, c.u, c.y)
+    assert set(d.ladder[-1].effects) == {"asymmetry", "saturation"}, d.explanation
+    assert d.ladder[-1].rmse < 2.0 * d.noise, d.explanation

@@ -159,16 +159,30 @@ def screen_on(s: Setup, inner: Model, th_inner: np.ndarray, chosen: list, nm: st
         return r, _effect_values(m, th, nm), (m, th, y - yh)
     fx = Fixed(inner, th_inner)
     m = compose(fx, [nm], s.cfg)
-    th0 = m.start(t, u, y, fx.theta0)
+    th_data = m.start(t, u, y, fx.theta0)
+    starts = [th_data]
     if prior:
+        # The values the effect took elsewhere (alone on the base) and its start from this rung's residual, the
+        # better kept: the carried values alone can lie where the rung gives no gradient (generated GMA stage
+        # 1100030, a gain kink and a soft two-sided limit: the limit alone on the base ended 285 µm below the
+        # stroke; carried onto the kink's rung the screen never moved from 37.1 nm, while from the rung's own
+        # start the kink + limit reach the noise floor, 3.8 nm).
+        th_prior = th_data.copy()
         for k, v in prior.items():
             if k in m.names:
-                th0[m.names.index(k)] = v
-    th = s.fit(m, t, u, y, np.clip(th0, *m.bounds))
+                th_prior[m.names.index(k)] = v
+        starts.insert(0, th_prior)
+    best = None
+    for th0 in starts:
+        th = s.fit(m, t, u, y, np.clip(th0, *m.bounds))
+        r = rmse((y - _simulate(m, th, t, u))[val])
+        if best is None or r < best[0]:
+            best = (r, th)
+    r, th = best
     vals = _effect_values(m, th, nm)
     if "offset" in m.names:  # the screen refits the offset too: part of the point a refit starts from
         vals["offset"] = float(th[m.names.index("offset")])
-    return rmse((y - _simulate(m, th, t, u))[val]), vals, None
+    return r, vals, None
 
 
 def _label(vv: dict) -> str:
