@@ -171,7 +171,8 @@ def screen_on(s: Setup, inner: Model, th_inner: np.ndarray, chosen: list, nm: st
         for k, v in prior.items():
             if k in m.names:
                 th_prior[m.names.index(k)] = v
-        starts.insert(0, th_prior)
+        if not np.array_equal(th_prior, th_data):  # the same start twice would be the same fit twice
+            starts.insert(0, th_prior)
     best = None
     for th0 in starts:
         th = s.fit(m, t, u, y, np.clip(th0, *m.bounds))
