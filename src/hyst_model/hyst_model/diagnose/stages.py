@@ -160,7 +160,7 @@ def screen_on(s: Setup, inner: Model, th_inner: np.ndarray, chosen: list, nm: st
     fx = Fixed(inner, th_inner)
     m = compose(fx, [nm], s.cfg)
     th_data = m.start(t, u, y, fx.theta0)
-    starts = [th_data]
+    starts_fx = [th_data]
     if prior:
         # The values the effect took elsewhere (alone on the base) and its start from this rung's residual, the
         # better kept: the carried values alone can lie where the rung gives no gradient (generated GMA stage
@@ -172,14 +172,12 @@ def screen_on(s: Setup, inner: Model, th_inner: np.ndarray, chosen: list, nm: st
             if k in m.names:
                 th_prior[m.names.index(k)] = v
         if not np.array_equal(th_prior, th_data):  # the same start twice would be the same fit twice
-            starts.insert(0, th_prior)
-    best = None
-    for th0 in starts:
+            starts_fx.insert(0, th_prior)
+    fits = []
+    for th0 in starts_fx:
         th = s.fit(m, t, u, y, np.clip(th0, *m.bounds))
-        r = rmse((y - _simulate(m, th, t, u))[val])
-        if best is None or r < best[0]:
-            best = (r, th)
-    r, th = best
+        fits.append((rmse((y - _simulate(m, th, t, u))[val]), th))
+    r, th = min(fits, key=lambda f: f[0])  # the first on a tie
     vals = _effect_values(m, th, nm)
     if "offset" in m.names:  # the screen refits the offset too: part of the point a refit starts from
         vals["offset"] = float(th[m.names.index("offset")])
