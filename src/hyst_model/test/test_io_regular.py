@@ -116,3 +116,21 @@ def test_auto_keeps_the_segment_with_the_excitation_not_the_longer_rest_after_it
     assert any("varies most" in n for n in notes), notes
     rec, _ = regularise(Record(t[keep], u[keep], y[keep]), "longest")   # as asked: the longest
     assert len(rec) == 1900
+
+
+def test_a_step_just_over_the_limit_of_the_kept_segment_is_bridged_too():
+    """Jittered real-time stamps: a 1.5 ms step is regular by the whole record's median period (1.001 ms) and a gap
+    by the kept segment's (0.999 ms), which Record.check then uses; CI once saw `hyst fit` refuse such a bag after
+    --gaps auto had cut it. The step is bridged by the kept segment's own median, and the result checks."""
+    a = 1.001e-3 * np.arange(6000)                       # a hold: the input does not vary
+    b0 = a[-1] + 0.05                                    # a 50 ms gap: the record is cut there
+    steps = np.full(4999, 0.999e-3)
+    steps[2500] = 1.5e-3
+    b = b0 + np.r_[0.0, np.cumsum(steps)]
+    t = np.r_[a, b]
+    u = np.r_[np.full(a.size, 75.0), 75.0 + 60.0 * np.sin(2 * np.pi * 2.0 * (b - b0))]
+    y = 1e-7 * u
+    out, notes = regularise(Record(t, u, y, {"source": "jittered"}), "auto")
+    out.check()
+    assert out.t[0] == b[0] and len(out) == b.size + 1, notes     # the sine segment kept, one sample put back
+    assert len(out.meta["bridged"]) == 1 and out.u[out.meta["bridged"][0]] == u[a.size + 2500], notes
