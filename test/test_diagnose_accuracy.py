@@ -106,3 +106,19 @@ def test_a_rung_screens_each_effect_from_its_own_start_too():
     d = diagnose(c.t, c.u, c.y)
     assert set(d.ladder[-1].effects) == {"asymmetry", "saturation"}, d.explanation
     assert d.ladder[-1].rmse < 2.0 * d.noise, d.explanation
+
+
+def test_a_base_that_does_not_carry_over_within_a_short_record_is_flagged():
+    """Generated GMA stage with no effect, 4 s at 5 kHz, five steps (a family at another sampling than the
+    benchmark's): the base fits its training part to 1.5× the noise floor and the held-out part to 13×, and creep
+    was named with nothing said. The diagnosis now cautions that the record does not determine the base; the
+    answer itself is not changed. The benchmark's own effect-free record gets no caution."""
+    from hyst_model.diagnose.diagnose import diagnose
+    from hyst_sim.generator import generate_case
+    c = generate_case(1600045, "none", rate=5000.0, duration=4.0)
+    d = diagnose(c.t, c.u, c.y)
+    assert d.baseline_rmse > 3.0 * max(d.baseline_rmse_train, d.noise)  # the case
+    assert d.caution is not None and "does not determine it" in d.explanation
+    assert d.to_json()["caution"] == d.caution
+    c0 = generate_case(FAMILY * 100000, "none")
+    assert diagnose(c0.t, c0.u, c0.y).caution is None

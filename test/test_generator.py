@@ -65,3 +65,25 @@ def test_every_form_changes_the_output_and_scales_with_strength():
         small = np.sqrt(np.mean((fn(c, 0.2)[1] - x) ** 2))
         large = np.sqrt(np.mean((fn(c, 1.0)[1] - x) ** 2))
         assert large > 1e-9 and large > small, name
+
+
+def test_other_rates_and_lengths_give_other_families_and_the_default_is_unchanged():
+    """Hold-out families at another sampling (bench_diagnose_accuracy --rate/--duration) — and the benchmark's
+    own family (2 kHz, 8 s) draws the same case with or without the arguments."""
+    a = generate_case(77, "single_large")
+    b = generate_case(77, "single_large", rate=2000.0, duration=8.0)
+    assert a.t.size == 16000 and np.array_equal(a.y, b.y) and a.forms == b.forms
+    c = generate_case(77, "single_large", rate=1000.0, duration=20.0)
+    assert c.t.size == 20000 and np.isclose(c.t[1] - c.t[0], 1e-3)
+    assert np.isclose(c.t_fresh[-1], c.t[-1]) and c.u_fresh.size == c.y_fresh.size == 20000
+    assert all(s > 0 for s in c.size_over_noise)
+    with pytest.raises(ValueError, match="1000 samples"):
+        generate_case(77, "none", rate=100.0, duration=2.0)
+
+
+@pytest.mark.parametrize("rate", [1000.0, 5000.0])
+def test_a_mode_lies_below_the_sampling_rate(rate):
+    from hyst_sim.generator.forms import draw
+    rng = np.random.default_rng(5)
+    fns = [draw("mode1", rng, 8.0, rate)["fn"] for _ in range(200)]
+    assert max(fns) <= 0.35 * rate and min(fns) >= 120.0

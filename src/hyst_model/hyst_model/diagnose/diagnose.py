@@ -41,6 +41,7 @@ from ..effects.signals import noise_floor, sample_time, fmt_len
 from ..errors import DataError, FitError
 from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scales, _simulate, candidate_names,
                     default_fitter, guarded_refit, refit, rmse, validation_mask)
+from .adequacy import base_caution
 from .parallel import default_jobs
 from .prune import prune
 from .swap import swap
@@ -69,6 +70,7 @@ class Diagnosis:
     seconds: float
     models: dict = field(default_factory=dict, repr=False)  # name → (Model, theta), for reports
     unexplained: Unexplained | None = None  # the error left ≥ UNEXPLAINED_FACTOR × noise, described
+    caution: str | None = None  # the base does not carry over to the hold-out: the record may not determine it
 
     def to_json(self) -> dict:
         return {
@@ -86,6 +88,7 @@ class Diagnosis:
                      "(one free run from rest)",
             "samples": self.n_samples, "dt": self.dt, "seconds": self.seconds,
             "unexplained": self.unexplained.to_json() if self.unexplained else None,
+            "caution": self.caution,
         }
 
 
@@ -194,8 +197,11 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         chosen = prune(s, ladder, models, chosen, cands)
     ranked, missing, unexplained, expl = verdict(s, cands, ladder, models, chosen, unexplained_factor,
                                                  _explain)           # 4. the answer in words
+    caution = base_caution(base, s.base_val, rmse(s.e_base[train]), noise, u, unexplained_factor)
+    if caution:
+        expl = f"{expl}; {caution}"
     return Diagnosis(base, s.base_val, rmse(s.e_base[train]), noise, ranked, missing, ladder, expl, n, dt,
-                     time.perf_counter() - t0, models, unexplained)
+                     time.perf_counter() - t0, models, unexplained, caution)
 
 
 def _explain(c: Candidate, base: str, base_val: float) -> str:

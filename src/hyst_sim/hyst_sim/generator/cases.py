@@ -96,14 +96,21 @@ def _calibrate(name: str, ctx: Ctx, draws: dict[str, dict], target: float) -> tu
     return hi, size(hi)
 
 
-def generate_case(seed: int, kind: str | None = None) -> Case:
-    """One case, fully determined by ``seed`` (and ``kind``; drawn from :data:`KINDS` if omitted)."""
+def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, duration: float = DURATION) -> Case:
+    """One case, fully determined by ``seed`` (and ``kind``; drawn from :data:`KINDS` if omitted).
+
+    ``rate`` (Hz) and ``duration`` (s) set the record's sampling; the defaults are the benchmark's own family, and
+    other values give families the diagnosis was not developed on (a mode's frequency stays below 0.35 × rate).
+    """
+    if not (rate > 0 and duration > 0 and rate * duration >= 1000):
+        raise ValueError(f"a case needs a positive rate and duration and at least 1000 samples "
+                         f"(rate {rate} Hz, duration {duration} s)")
     rng = np.random.default_rng(seed)
     kind = kind or str(rng.choice(KINDS))
     truth = "pi" if kind == "pi_truth" else str(rng.choice(["pea", "gma"]))
     prof = GMA if truth == "gma" else (PEA if truth == "pea" else (PEA if rng.random() < 0.5 else GMA))
     exc = str(rng.choice(EXCITATIONS))
-    t = np.arange(int(DURATION * RATE)) / RATE
+    t = np.arange(int(round(duration * rate))) / rate
     if truth == "pi":
         simulate = _pi_simulator(prof.v_min, prof.v_max, prof.stroke, rng)
     else:
@@ -121,7 +128,7 @@ def generate_case(seed: int, kind: str | None = None) -> Case:
         forms = [str(rng.choice(out))]
     else:
         forms = []
-    draws = {f: draw(f, rng, DURATION) for f in forms}
+    draws = {f: draw(f, rng, duration, rate) for f in forms}
     lo_hi = (3.0, 5.0) if kind == "single_small" else (5.0, 200.0)
     targets = [float(np.exp(rng.uniform(*np.log(lo_hi)))) * noise for _ in forms]
     seeds = rng.integers(0, 2**31, 3)
@@ -157,8 +164,8 @@ def generate_case(seed: int, kind: str | None = None) -> Case:
     return Case(seed, kind, truth, exc, strengths, expected, sizes, noise, t, u, y, t.copy(), uf, yf)
 
 
-def case_family(n: int, seed: int = 0) -> list[Case]:
+def case_family(n: int, seed: int = 0, *, rate: float = RATE, duration: float = DURATION) -> list[Case]:
     """``n`` cases with a balanced mix of :data:`KINDS` (singles weighted up), seeds ``seed*100000 + i``."""
     weights = {"single_large": 4, "single_small": 2, "pair": 2, "outside": 1, "none": 2, "pi_truth": 1}
     order = [k for k, w in weights.items() for _ in range(w)]
-    return [generate_case(seed * 100000 + i, order[i % len(order)]) for i in range(n)]
+    return [generate_case(seed * 100000 + i, order[i % len(order)], rate=rate, duration=duration) for i in range(n)]

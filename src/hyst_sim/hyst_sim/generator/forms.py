@@ -142,9 +142,10 @@ FORMS: dict[str, tuple[Callable, str]] = {
 LIBRARY_NAME = {k: v[1] for k, v in FORMS.items()}
 
 
-def draw(form: str, rng: np.random.Generator, duration: float) -> dict:
-    """The form's random shape parameters (not its strength)."""
+def draw(form: str, rng: np.random.Generator, duration: float, rate: float = 2000.0) -> dict:
+    """The form's random shape parameters (not its strength); a mode lies below 0.35 × the sampling ``rate``."""
     return {"tau": rng.uniform(0.05, 1.0), "tau1": rng.uniform(0.02, 0.3), "tau2": rng.uniform(0.5, 3.0),
-            "at": rng.uniform(0.4, 0.7), "fn": rng.uniform(120.0, 700.0), "zeta": rng.uniform(0.02, 0.1),
+            "at": rng.uniform(0.4, 0.7), "fn": rng.uniform(120.0, min(700.0, 0.35 * rate)),
+            "zeta": rng.uniform(0.02, 0.1),
             "ratio": rng.uniform(1.3, 1.9), "dmax": rng.uniform(2.0, 19.0), "period": rng.uniform(2.0, 4.0),
             "phase": rng.uniform(0, 2 * np.pi)}
