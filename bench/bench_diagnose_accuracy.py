@@ -164,12 +164,14 @@ def main(argv: list[str] | None = None) -> str:
                     help="sampling rate of the generated records, Hz (default: the generator's 2 kHz)")
     ap.add_argument("--duration", type=float, default=None,
                     help="length of the generated records, s (default: the generator's 8 s)")
+    ap.add_argument("--shapes", choices=("thesis", "wide"), default=None,
+                    help="MBW truths: the thesis's shape (default) or shapes drawn wide (other actuators)")
     a = ap.parse_args(["--n", "24"] if argv is None else argv)
     kw = {k: v for k, v in (("min_factor", a.min_factor), ("noise_margin", a.noise_margin)) if v is not None}
     from hyst_sim.generator.cases import KINDS  # noqa: F401 - fail early if the generator is missing
     weights = {"single_large": 4, "single_small": 2, "pair": 2, "outside": 1, "none": 2, "pi_truth": 1}
     order = [k for k, w in weights.items() for _ in range(w)]
-    gen = {k: v for k, v in (("rate", a.rate), ("duration", a.duration)) if v is not None}
+    gen = {k: v for k, v in (("rate", a.rate), ("duration", a.duration), ("shapes", a.shapes)) if v is not None}
     jobs = [(a.seed * 100000 + i, order[i % len(order)], kw, gen) for i in range(a.n)]
     if a.kinds:
         wanted = set(a.kinds.split(","))

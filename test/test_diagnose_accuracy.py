@@ -118,7 +118,7 @@ def test_a_base_that_does_not_carry_over_within_a_short_record_is_flagged():
     c = generate_case(1600045, "none", rate=5000.0, duration=4.0)
     d = diagnose(c.t, c.u, c.y)
     assert d.baseline_rmse > 3.0 * max(d.baseline_rmse_train, d.noise)  # the case
-    assert d.caution is not None and "does not determine it" in d.explanation
+    assert d.caution is not None and "does not determine the base" in d.explanation
     assert d.to_json()["caution"] == d.caution
     c0 = generate_case(FAMILY * 100000, "none")
     assert diagnose(c0.t, c0.u, c0.y).caution is None

@@ -87,3 +87,23 @@ def test_a_mode_lies_below_the_sampling_rate(rate):
     rng = np.random.default_rng(5)
     fns = [draw("mode1", rng, 8.0, rate)["fn"] for _ in range(200)]
     assert max(fns) <= 0.35 * rate and min(fns) >= 120.0
+
+
+def test_wide_shapes_are_admissible_stages_of_the_profiles_stroke():
+    """The "wide" truth family (other actuators): Remark 4.1 holds, the loop is 3-25 % wide and the full-range
+    response is the profile's stroke within ±20 %; the benchmark's own family is unchanged."""
+    from hyst_sim.generator.cases import _wide_truth
+    rng = np.random.default_rng(3)
+    for prof_name, prof in (("pea", PEA), ("gma", GMA)):
+        for _ in range(5):
+            p = _wide_truth(prof_name, rng)
+            assert p.alpha1 < -abs(p.psi1) and p.alpha2 < -abs(p.psi2)
+            t = np.arange(4000) / 2000.0
+            u = prof.v_min + (prof.v_max - prof.v_min) * (0.5 + 0.5 * np.sin(2 * np.pi * t))
+            y = p.simulate(u)[2000:]
+            assert 0.75 * prof.stroke <= np.ptp(y) <= 1.25 * prof.stroke
+    a = generate_case(9, "single_large", shapes="wide")
+    b = generate_case(9, "single_large")
+    assert a.forms[0][0] != "" and not np.array_equal(a.y, b.y)
+    with pytest.raises(ValueError, match="shapes"):
+        generate_case(9, "none", shapes="narrow")

@@ -11,7 +11,7 @@ from hyst_model.core import MBWParams, stage_model
 from .excitation import EXCITATIONS, excitation
 from .forms import FORMS, LIBRARY_NAME, Ctx, draw
 
-__all__ = ["Case", "generate_case", "case_family", "KINDS", "EXPECTED"]
+__all__ = ["Case", "generate_case", "case_family", "KINDS", "EXPECTED", "SHAPES"]
 
 #: Case kinds drawn by :func:`case_family`: one effect (large ≥ 5× noise, small 3–5×), a pair, an effect outside
 #: the library, none, and a non-MBW (Prandtl–Ishlinskii) truth with no effect.
@@ -51,6 +51,39 @@ def _mbw_truth(profile: str, rng: np.random.Generator) -> MBWParams:
     return p.replace(zeta1=p.zeta1 * rng.uniform(0.85, 1.15), zeta2=p.zeta2 * rng.uniform(0.7, 1.3),
                      y_scale=p.y_scale * rng.uniform(0.8, 1.2),
                      offset=p.offset + rng.uniform(-2e-6, 2e-6))
+
+
+#: Truth families: the thesis's identified shape with its scales varied, or shapes drawn wide (other actuators).
+SHAPES = ("thesis", "wide")
+
+
+def _wide_truth(profile: str, rng: np.random.Generator) -> MBWParams:
+    """An MBW stage of another shape than the thesis's: ζ, ψ, α and the memories δ1, δ2 drawn over wide ranges
+    (Remark 4.1 kept: α < −|ψ|), the loop 3–25 % of the stroke wide, scaled to 0.8–1.2 × the profile's stroke."""
+    p0 = stage_model(profile)
+    prof = GMA if profile == "gma" else PEA
+    t = np.arange(4000) / 2000.0
+    u = prof.v_min + (prof.v_max - prof.v_min) * (0.5 + 0.5 * np.sin(2 * np.pi * t))
+    for _ in range(200):
+        psi1 = rng.uniform(0.005, 0.12)
+        psi2 = rng.uniform(-0.05, 0.05)
+        p = p0.replace(zeta1=rng.uniform(0.2, 0.7), zeta2=rng.uniform(0.0, 0.05), psi1=psi1, psi2=psi2,
+                       alpha1=-abs(psi1) * rng.uniform(1.1, 3.0), alpha2=-abs(psi2) * rng.uniform(1.1, 3.0) - 0.005,
+                       delta1=rng.uniform(0.9, 0.99), delta2=rng.uniform(0.9, 0.99))
+        y = p.simulate(u)[2000:]
+        if not np.all(np.isfinite(y)) or np.ptp(y) <= 0:
+            continue
+        uu = u[2000:]
+        up = np.diff(uu, prepend=uu[0]) > 0
+        grid = np.linspace(uu.min() + 0.1 * np.ptp(uu), uu.max() - 0.1 * np.ptp(uu), 20)
+        ya = np.interp(grid, np.sort(uu[up]), y[up][np.argsort(uu[up])])
+        yd = np.interp(grid, np.sort(uu[~up]), y[~up][np.argsort(uu[~up])])
+        width = np.max(np.abs(ya - yd)) / np.ptp(y)
+        if not 0.03 <= width <= 0.25:
+            continue
+        scale = prof.stroke * rng.uniform(0.8, 1.2) / np.ptp(y)
+        return p.replace(y_scale=p.y_scale * scale, offset=p.offset + rng.uniform(-2e-6, 2e-6))
+    raise RuntimeError("no MBW shape with a 3-25 % loop drawn in 200 tries")
 
 
 def _pi_simulator(v_min: float, v_max: float, stroke: float, rng: np.random.Generator):
@@ -96,12 +129,16 @@ def _calibrate(name: str, ctx: Ctx, draws: dict[str, dict], target: float) -> tu
     return hi, size(hi)
 
 
-def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, duration: float = DURATION) -> Case:
+def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, duration: float = DURATION,
+                  shapes: str = "thesis") -> Case:
     """One case, fully determined by ``seed`` (and ``kind``; drawn from :data:`KINDS` if omitted).
 
     ``rate`` (Hz) and ``duration`` (s) set the record's sampling; the defaults are the benchmark's own family, and
     other values give families the diagnosis was not developed on (a mode's frequency stays below 0.35 × rate).
+    ``shapes``: the MBW truths' family (:data:`SHAPES`): ``"thesis"`` (the benchmark's own) or ``"wide"``.
     """
+    if shapes not in SHAPES:
+        raise ValueError(f"shapes must be one of {', '.join(SHAPES)}, not {shapes!r}")
     if not (rate > 0 and duration > 0 and rate * duration >= 1000):
         raise ValueError(f"a case needs a positive rate and duration and at least 1000 samples "
                          f"(rate {rate} Hz, duration {duration} s)")
@@ -114,7 +151,7 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
     if truth == "pi":
         simulate = _pi_simulator(prof.v_min, prof.v_max, prof.stroke, rng)
     else:
-        p = _mbw_truth(truth, rng)
+        p = _mbw_truth(truth, rng) if shapes == "thesis" else _wide_truth(truth, rng)
         simulate = p.simulate
     noise = float(rng.uniform(1e-9, 4e-9))
     lib = [f for f, n in LIBRARY_NAME.items() if n != "unexplained"]
@@ -164,8 +201,10 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
     return Case(seed, kind, truth, exc, strengths, expected, sizes, noise, t, u, y, t.copy(), uf, yf)
 
 
-def case_family(n: int, seed: int = 0, *, rate: float = RATE, duration: float = DURATION) -> list[Case]:
+def case_family(n: int, seed: int = 0, *, rate: float = RATE, duration: float = DURATION,
+                shapes: str = "thesis") -> list[Case]:
     """``n`` cases with a balanced mix of :data:`KINDS` (singles weighted up), seeds ``seed*100000 + i``."""
     weights = {"single_large": 4, "single_small": 2, "pair": 2, "outside": 1, "none": 2, "pi_truth": 1}
     order = [k for k, w in weights.items() for _ in range(w)]
-    return [generate_case(seed * 100000 + i, order[i % len(order)], rate=rate, duration=duration) for i in range(n)]
+    return [generate_case(seed * 100000 + i, order[i % len(order)], rate=rate, duration=duration, shapes=shapes)
+            for i in range(n)]
