@@ -30,7 +30,7 @@ def base_caution(base: str, val_rmse: float, train_rmse: float, noise: float, u:
     """The caution for a base model with validation RMSE ``val_rmse`` and training RMSE ``train_rmse`` (m), or
     None when it carries over (or its held-out error is within ``floor_factor`` × the noise floor ``noise``).
 
-    ``u`` (V) is only described: how many distinct input levels the record holds for a steps record.
+    ``u`` (V) only enters the message: for a steps record (mostly holds), how many input changes it holds.
     """
     if not (np.isfinite(val_rmse) and np.isfinite(train_rmse)) or val_rmse < floor_factor * noise:
         return None
