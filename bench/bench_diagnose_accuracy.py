@@ -168,15 +168,13 @@ def main(argv: list[str] | None = None) -> str:
                     help="MBW truths: the thesis's shape (default) or shapes drawn wide (other actuators)")
     a = ap.parse_args(["--n", "24"] if argv is None else argv)
     kw = {k: v for k, v in (("min_factor", a.min_factor), ("noise_margin", a.noise_margin)) if v is not None}
-    from hyst_sim.generator.cases import KINDS  # noqa: F401 - fail early if the generator is missing
-    weights = {"single_large": 4, "single_small": 2, "pair": 2, "outside": 1, "none": 2, "pi_truth": 1}
-    order = [k for k, w in weights.items() for _ in range(w)]
+    from hyst_sim.generator.cases import FAMILY_WEIGHTS, family_kinds  # the generator's own family order
     gen = {k: v for k, v in (("rate", a.rate), ("duration", a.duration), ("shapes", a.shapes)) if v is not None}
-    jobs = [(a.seed * 100000 + i, order[i % len(order)], kw, gen) for i in range(a.n)]
+    jobs = [(a.seed * 100000 + i, k, kw, gen) for i, k in enumerate(family_kinds(a.n))]
     if a.kinds:
         wanted = set(a.kinds.split(","))
-        if not wanted <= set(weights):
-            ap.error(f"--kinds: unknown {sorted(wanted - set(weights))}; known: {', '.join(weights)}")
+        if not wanted <= set(FAMILY_WEIGHTS):
+            ap.error(f"--kinds: unknown {sorted(wanted - set(FAMILY_WEIGHTS))}; known: {', '.join(FAMILY_WEIGHTS)}")
         jobs = [j for j in jobs if j[1] in wanted]
     if a.jobs > 1:
         from multiprocessing import get_context

@@ -61,7 +61,7 @@ def test_every_form_changes_the_output_and_scales_with_strength():
     sim = stage_model("pea").simulate
     x = sim(u)
     for name, (fn, _) in FORMS.items():
-        c = Ctx(t, u, sim, x, 30e-6, draw(name, rng, 4.0))
+        c = Ctx(t, u, sim, x, 30e-6, draw(name, rng, 4.0, 2000.0))
         small = np.sqrt(np.mean((fn(c, 0.2)[1] - x) ** 2))
         large = np.sqrt(np.mean((fn(c, 1.0)[1] - x) ** 2))
         assert large > 1e-9 and large > small, name

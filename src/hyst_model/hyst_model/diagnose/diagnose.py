@@ -197,10 +197,11 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         chosen = prune(s, ladder, models, chosen, cands)
     ranked, missing, unexplained, expl = verdict(s, cands, ladder, models, chosen, unexplained_factor,
                                                  _explain)           # 4. the answer in words
-    caution = base_caution(base, s.base_val, rmse(s.e_base[train]), noise, u, unexplained_factor)
+    base_train = rmse(s.e_base[train])
+    caution = base_caution(base, s.base_val, base_train, noise, u, unexplained_factor)
     if caution:
         expl = f"{expl}; {caution}"
-    return Diagnosis(base, s.base_val, rmse(s.e_base[train]), noise, ranked, missing, ladder, expl, n, dt,
+    return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
                      time.perf_counter() - t0, models, unexplained, caution)
 
 

@@ -5,13 +5,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyst_common.profiles import GMA, PEA
+from hyst_common.profiles import GMA, PEA, get_profile
 from hyst_model.core import MBWParams, stage_model
 
 from .excitation import EXCITATIONS, excitation
 from .forms import FORMS, LIBRARY_NAME, Ctx, draw
 
-__all__ = ["Case", "generate_case", "case_family", "KINDS", "EXPECTED", "SHAPES"]
+__all__ = ["Case", "generate_case", "case_family", "family_kinds", "KINDS", "EXPECTED", "SHAPES", "FAMILY_WEIGHTS"]
 
 #: Case kinds drawn by :func:`case_family`: one effect (large ≥ 5× noise, small 3–5×), a pair, an effect outside
 #: the library, none, and a non-MBW (Prandtl–Ishlinskii) truth with no effect.
@@ -61,7 +61,7 @@ def _wide_truth(profile: str, rng: np.random.Generator) -> MBWParams:
     """An MBW stage of another shape than the thesis's: ζ, ψ, α and the memories δ1, δ2 drawn over wide ranges
     (Remark 4.1 kept: α < −|ψ|), the loop 3–25 % of the stroke wide, scaled to 0.8–1.2 × the profile's stroke."""
     p0 = stage_model(profile)
-    prof = GMA if profile == "gma" else PEA
+    prof = get_profile(profile)
     t = np.arange(4000) / 2000.0
     u = prof.v_min + (prof.v_max - prof.v_min) * (0.5 + 0.5 * np.sin(2 * np.pi * t))
     for _ in range(200):
@@ -204,7 +204,15 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
 def case_family(n: int, seed: int = 0, *, rate: float = RATE, duration: float = DURATION,
                 shapes: str = "thesis") -> list[Case]:
     """``n`` cases with a balanced mix of :data:`KINDS` (singles weighted up), seeds ``seed*100000 + i``."""
-    weights = {"single_large": 4, "single_small": 2, "pair": 2, "outside": 1, "none": 2, "pi_truth": 1}
-    order = [k for k, w in weights.items() for _ in range(w)]
-    return [generate_case(seed * 100000 + i, order[i % len(order)], rate=rate, duration=duration, shapes=shapes)
-            for i in range(n)]
+    return [generate_case(seed * 100000 + i, k, rate=rate, duration=duration, shapes=shapes)
+            for i, k in enumerate(family_kinds(n))]
+
+
+#: How often each kind comes in a family (singles weighted up), in the order they cycle.
+FAMILY_WEIGHTS = {"single_large": 4, "single_small": 2, "pair": 2, "outside": 1, "none": 2, "pi_truth": 1}
+
+
+def family_kinds(n: int) -> list[str]:
+    """The kinds of a family's first ``n`` cases (case i has seed ``seed*100000 + i``)."""
+    order = [k for k, w in FAMILY_WEIGHTS.items() for _ in range(w)]
+    return [order[i % len(order)] for i in range(n)]

@@ -142,7 +142,7 @@ FORMS: dict[str, tuple[Callable, str]] = {
 LIBRARY_NAME = {k: v[1] for k, v in FORMS.items()}
 
 
-def draw(form: str, rng: np.random.Generator, duration: float, rate: float = 2000.0) -> dict:
+def draw(form: str, rng: np.random.Generator, duration: float, rate: float) -> dict:
     """The form's random shape parameters (not its strength); a mode lies below 0.35 × the sampling ``rate``."""
     return {"tau": rng.uniform(0.05, 1.0), "tau1": rng.uniform(0.02, 0.3), "tau2": rng.uniform(0.5, 3.0),
             "at": rng.uniform(0.4, 0.7), "fn": rng.uniform(120.0, min(700.0, 0.35 * rate)),
