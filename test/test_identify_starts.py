@@ -23,14 +23,15 @@ def test_base_fit_reaches_the_noise_floor_on_mbw_truths(seed):
     assert np.sqrt(np.mean(e * e)) < 1.3 * c.noise, f"split {SPLIT}"
 
 
-@pytest.mark.parametrize("seed", [700057, 700117])
-def test_every_start_is_probed_before_the_best_go_on(seed, monkeypatch):
-    """The equation-error ranking put the start that reaches the noise floor 9th of 18 on these effect-free records
-    (accuracy seed 7: both made false alarms, at 1.26x and 1.94x the noise): every start now runs a few iterations
-    first. Without the probe (the first n_starts starts in equation-error order, as before) the fit stays off."""
+@pytest.mark.parametrize("seed,shapes", [(2500001, "wide")])
+def test_every_start_is_probed_before_the_best_go_on(seed, shapes, monkeypatch):
+    """The equation-error ranking can put the start that reaches the noise floor behind others (accuracy seed 7:
+    9th of 18 on 700057 and 700117, both false alarms): every start runs a few iterations first. Since the offset
+    scan and the bounded regression those two rank right; of 300 effect-free generated records this one still
+    needs the probe. Without it (the first n_starts starts in equation-error order, as before) the fit stays off."""
     from hyst_model.identify.fast import FastFit
     from hyst_model.identify.memo import FitMemo
-    c = generate_case(seed, "none")
+    c = generate_case(seed, "none", shapes=shapes)
     cfg = dict(_scales(c.u, c.y), dt=float(c.t[1] - c.t[0]))
     m = build_model("mbw", (), cfg)
     val = validation_mask(c.t.size, c.u)
@@ -94,3 +95,38 @@ def test_base_fit_reaches_the_noise_floor_on_a_stage_with_fast_memory():
     val = validation_mask(c.t.size, c.u)
     e = (c.y - m.simulate(th, c.t, c.u))[val]
     assert np.sqrt(np.mean(e * e)) < 1.3 * c.noise
+
+
+@pytest.mark.parametrize("seed,shapes", [(2200070, "thesis"), (2200163, "wide"), (2200178, "wide"),
+                                         (2300013, "wide"), (2300048, "wide")])
+def test_base_fit_reaches_the_noise_floor_where_the_equation_error_starts_missed(seed, shapes):
+    """Effect-free generated records whose base fits ended at 27-195x the noise floor (the truth, inside the
+    bounds, sits at it). Three causes, each fixed in :func:`hyst_model.identify.fast.equation_error_starts` or the
+    bounds: 2200070 (a piezo driven at 54-98 V) has its offset, the reading at 0 V, 15 µm below every reading,
+    outside the offsets searched; 2200163 and 2200178 have input memories longer than their output's (δ2 > δ1),
+    so ζ1 is 2.0 and 1.2 in the data's units, beyond Table 3.1's 0.9; and the regression clipped each coefficient
+    to its bound on its own, which breaks ψ1 + α1 when ν keeps one sign (only their sum is then seen)."""
+    c = generate_case(seed, "none", shapes=shapes)
+    cfg = dict(_scales(c.u, c.y), dt=float(c.t[1] - c.t[0]))
+    m = build_model("mbw", (), cfg)
+    th = default_fitter(m, c.t, c.u, c.y, None)
+    val = validation_mask(c.t.size, c.u)
+    e = (c.y - m.simulate(th, c.t, c.u))[val]
+    assert np.sqrt(np.mean(e * e)) < 1.3 * c.noise
+
+
+@pytest.mark.parametrize("rate", [True, False])
+def test_offset_scan_equals_the_regression_at_each_offset(rate):
+    """The one-sweep offset scan gives the same normal equations as building them at each offset."""
+    from hyst_model.identify.fast import _ee_normal, _ee_normal_scan
+    rng = np.random.default_rng(3)
+    y0 = np.cumsum(rng.normal(size=800))
+    y1 = y0 + rng.normal(size=800)
+    u0, u1 = rng.normal(size=800), rng.normal(size=800)
+    cs = np.sort(np.concatenate([rng.uniform(y0.min() - 5, y0.max() + 5, 30), y0[:3]]))  # also exactly on rows
+    G, b, yy = _ee_normal_scan(y0, y1, u0, u1, cs, 0.93, 2.5, rate)
+    for i, c in enumerate(cs):
+        G1, b1, yy1 = _ee_normal(y0, y1, u0, u1, c, 0.93, 2.5, rate)
+        np.testing.assert_allclose(G[i], G1, rtol=1e-9, atol=1e-9 * np.abs(G1).max())
+        np.testing.assert_allclose(b[i], b1, rtol=1e-9, atol=1e-9 * np.abs(b1).max())
+        assert yy[i] == pytest.approx(yy1, rel=1e-9)
