@@ -96,32 +96,29 @@ class Delay(Effect):
         return DelayPredictor(tau, self.dt, self.side, base)
 
     def start(self, t, u, y, residual):
-        """τ from the data's own impulse response, else from shifting the base model's output.
+        """τ from the data's own impulse response, else from equation-error fits of the record shifted against
+        itself.
 
         The base recursion (3.21) responds to an input change in the same sample (its ζ1·ν_k term), so the
         least-squares FIR response of the output increments to the input increments peaks at lag 0 without a
         delay and at lag τ/Δt with one (split between two lags for fractional delays, as the linear
         interpolation does). A base fitted without the delay imitates it with its δ terms, which hides the
         delay from its residual; the impulse response does not depend on that fit (regularised where the input
-        is band-limited, :func:`_fir_delay`). Where it shows no clear peak, the residual search is used.
+        is band-limited, :func:`_fir_delay`). Where it shows no clear peak (a stage with long memory smears it),
+        the lag at which an MBW equation-error start fits the shifted record best is used
+        (:func:`hyst_model.identify.lag.equation_error_lag`), which needs no base fit either.
         """
+        from ..identify.lag import equation_error_lag  # late: identification fits the models effects extend
         t = np.asarray(t, float)
         u = np.asarray(u, float)
         y = np.asarray(y, float)
         dt = float(np.median(np.diff(t)))
         hi = self.params()[0].upper
-        tau = _fir_delay(u, y, min(int(hi / dt), 40))
-        if tau is not None:
-            return {"tau": float(np.clip(tau * dt, 0.0, hi))}
-        # The model x = y − residual leads the measurement: y(t) ≈ x(t − τ). Search τ on a grid of samples.
-        x = y - residual
-        best_tau, best = 0.0, float(residual @ residual)
-        for k in range(1, int(hi / dt) + 1):
-            xs = np.concatenate([np.full(k, x[0]), x[:-k]])
-            c = float(((y - xs) ** 2).sum())
-            if c < best:
-                best_tau, best = k * dt, c
-        return {"tau": best_tau}
+        lags = min(int(hi / dt), 40)
+        tau = _fir_delay(u, y, lags)
+        if tau is None:
+            tau, _ = equation_error_lag(u, y, lags)
+        return {"tau": float(np.clip(tau * dt, 0.0, hi))}
 
     def signature(self, t, u, residual, dt):
         ud = rate_of(u, dt, smooth_seconds=5 * dt)
@@ -155,7 +152,7 @@ def _fir_delay(u: np.ndarray, y: np.ndarray, lags: int) -> float | None:
     ridge = np.linalg.cond(Gn) > FIR_COND_MAX
     h = np.linalg.solve(Gn + (FIR_RIDGE * np.eye(lags + 1) if ridge else 0.0), (X.T @ dy) / d) / d
     k = int(np.argmax(h))
-    if h[k] <= 0:
+    if h[k] <= 0 or k == lags:  # at the last tap the peak is cut off, not found
         return None
     lo, hi = h[k - 1] if k > 0 else 0.0, h[k + 1] if k < lags else 0.0
     if ridge:

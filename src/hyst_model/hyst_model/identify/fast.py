@@ -216,7 +216,7 @@ def _lowpass(u: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def equation_error_starts(base: MBWModel, u: np.ndarray, y: np.ndarray, a: int = 0,
-                          delta2_grid: np.ndarray = DELTA2_GRID, n_offsets: int = 151, refine: int = 12,
+                          delta2_grid: np.ndarray = DELTA2_GRID, n_offsets: int = 151, refine: int = 8,
                           max_rows: int = 4000, keep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Equation-error parameter sets for an MBW/BW model, one per δ2 of a grid and per regression target (the
     low-passed output, and the output itself when the low-pass changed it), ranked by free-run RMSE.
@@ -321,9 +321,9 @@ def equation_error_starts(base: MBWModel, u: np.ndarray, y: np.ndarray, a: int =
 
         g = 0.5 * (np.sqrt(5.0) - 1.0)
 
-        def best_offset(d2: float) -> tuple[float, float]:
+        def best_offset(d2: float) -> float:
             """The offset with the least equation-error residual at δ2 (dense grid, then golden section between
-            the neighbours of its best point), and that residual."""
+            the neighbours of its best point)."""
             j = int(np.argmin(scan(d2)))
             ga, gb = c_grid[max(j - 1, 0)], c_grid[min(j + 1, c_grid.size - 1)]
             x1, x2 = gb - g * (gb - ga), ga + g * (gb - ga)
@@ -337,8 +337,7 @@ def equation_error_starts(base: MBWModel, u: np.ndarray, y: np.ndarray, a: int =
                     ga, x1, f1 = x1, x2, f2
                     x2 = ga + g * (gb - ga)
                     f2 = solve(d2, x2)[1]
-            c = 0.5 * (ga + gb)
-            return c, solve(d2, c)[1]
+            return 0.5 * (ga + gb)
 
         def candidate(d2: float, c: float) -> np.ndarray:
             th = base.theta0.copy()
@@ -347,29 +346,7 @@ def equation_error_starts(base: MBWModel, u: np.ndarray, y: np.ndarray, a: int =
             th[names.index("offset")] = c
             return np.clip(th, lo, hi)
 
-        grid = np.asarray(delta2_grid, dtype=np.float64)
-        fits = [best_offset(d2) for d2 in grid]
-        out = [candidate(d2, c) for d2, (c, _) in zip(grid, fits)]
-        # δ2 itself between the grid's neighbours of its least residual: with steps, ψ1 and α1 are told apart by
-        # few rows, and a grid δ2 1 % off the stage's moved them 3x (a generated magnetostrictive steps record)
-        srt = np.sort(grid)
-        j = int(np.searchsorted(srt, grid[int(np.argmin([f[1] for f in fits]))]))
-        ga, gb = srt[max(j - 1, 0)], srt[min(j + 1, srt.size - 1)]
-        if gb > ga:
-            x1, x2 = gb - g * (gb - ga), ga + g * (gb - ga)
-            f1, f2 = best_offset(x1)[1], best_offset(x2)[1]
-            for _ in range(refine):
-                if f1 < f2:
-                    gb, x2, f2 = x2, x1, f1
-                    x1 = gb - g * (gb - ga)
-                    f1 = best_offset(x1)[1]
-                else:
-                    ga, x1, f1 = x1, x2, f2
-                    x2 = ga + g * (gb - ga)
-                    f2 = best_offset(x2)[1]
-            d2 = 0.5 * (ga + gb)
-            out.append(candidate(d2, best_offset(d2)[0]))
-        return out
+        return [candidate(d2, best_offset(d2)) for d2 in delta2_grid]
 
     # The low-passed output keeps noise out of the one-step regression, but it also removes the sample-to-sample
     # response of a stage with fast memory (δ1 ≈ 0.90, δ2 ≈ 0.93: a pole near 30 Hz at 2 kHz), and the regression
