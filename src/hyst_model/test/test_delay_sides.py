@@ -177,3 +177,12 @@ def test_delay_start_on_a_stage_with_long_memory_is_the_delay_not_the_last_tap()
     d = Delay({"dt": dt, "u_scale": 15.0, "y_scale": 5e-6, "delay.side": "output"})
     tau = d.start(c.t, c.u, c.y, np.zeros_like(c.y))["tau"] / dt
     assert 12.5 <= tau <= 14.5
+
+
+def test_lag_search_on_a_long_record_uses_its_busiest_stretch():
+    from hyst_model.identify.lag import _busiest_window
+    u = np.zeros(30000)
+    u[21000:21400] = np.sin(np.linspace(0, 40, 400))
+    w = _busiest_window(u, 1000)
+    assert w.stop - w.start == 1000 and w.start <= 21000 and 21400 <= w.stop
+    assert _busiest_window(u[:800], 1000) == slice(0, 800)
