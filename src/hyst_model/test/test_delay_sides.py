@@ -165,20 +165,6 @@ def test_equation_error_lag_finds_the_delay_of_an_mbw_record(side, tau):
     assert np.nanmin(prof) < 0.2 * np.nanmax(prof)  # a clear dip, not a flat profile
 
 
-def test_delay_start_on_a_stage_with_long_memory_is_the_delay_not_the_last_tap():
-    """Generated wide-shape piezo stage (δ1 = 0.97), sensor delay of about 13.5 samples on band-limited noise: the
-    ridge FIR response was smeared by the stage's own memory and peaked at its last tap (39.6 samples), the joint
-    fit stayed at 12.8 ms and 51x the noise floor, and the diagnosis named a mode. The last tap is no longer taken
-    for a peak; the equation-error lag search finds the delay."""
-    from hyst_sim.generator import generate_case
-    c = generate_case(2000038, "single_large", shapes="wide")
-    dt = float(c.t[1] - c.t[0])
-    assert _fir_delay(c.u, c.y, 40) is None
-    d = Delay({"dt": dt, "u_scale": 15.0, "y_scale": 5e-6, "delay.side": "output"})
-    tau = d.start(c.t, c.u, c.y, np.zeros_like(c.y))["tau"] / dt
-    assert 12.5 <= tau <= 14.5
-
-
 def test_lag_search_on_a_long_record_uses_its_busiest_stretch():
     from hyst_model.identify.lag import _busiest_window
     u = np.zeros(30000)
