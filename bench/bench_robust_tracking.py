@@ -82,7 +82,7 @@ def track(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=N
         from hyst_control.pid import PIDGains
         from hyst_control.stability import guard, identified_resonance
 
-        res = identified_resonance(spec.effects, spec.values, comp)  # checked as the compensation runs it
+        res = identified_resonance(spec.effects, spec.values, comp, spec.config)  # checked as the compensation runs it
         default = {"dppc": DPPCGains(), "dmrac": DMRACGains(), "pid": PIDGains()}[alg]
         v_range = (limits.v_min, limits.v_max) if limits is not None else (0.0, 150.0)
         gains = guard(alg, default, model, 1.0 / RATE, res, v_range=v_range).gains

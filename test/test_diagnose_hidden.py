@@ -54,7 +54,8 @@ def test_dynamics_is_tried_in_both_structures_and_the_better_kept():
     """The hidden resonance follows the hysteresis (series): diagnose fits both structures and says so."""
     d = _bag("dynamics")
     ev = d.candidates[0].evidence
-    assert "structure series (" in ev and "structure feedback (" in ev and ev.endswith("kept structure series")
+    assert "structure series, modes 1 (" in ev and "structure feedback, modes 1 (" in ev
+    assert "structure series, modes 2 (" in ev and ev.endswith("kept structure series, modes 1")
     assert d.models[d.ladder[1].model][0].effects[0].structure == "series"
     assert d.ladder[1].rmse < 1.25 * d.noise  # at the sensor noise floor once the resonance is in
 

@@ -222,3 +222,70 @@ def test_a_compensated_mode_needs_less_derating_and_tolerates_its_envelope(algor
         out = run_closed_loop(make_controller(algorithm, m, DT, gains=comp_v.gains, compensation=comp), "sine:10",
                               1.0, plant=_resonant_plant(fn * f, zeta), skip=0.3)
         assert out.finite and out.rmse < 0.3e-6, (f, out.rmse)
+
+
+# -- two modes in cascade (dynamics.modes: 2) ---------------------------------------------------------------------
+@pytest.mark.parametrize("lag", [0.0, 0.4, 1.0])
+def test_two_modes_are_checked_as_the_model_simulates_them(lag):
+    """resonance_tf with a second mode filters as the dynamics effect with ``modes: 2`` does (the cascade behind
+    one hold, read ``lag`` samples into it, the participation on both)."""
+    from scipy.signal import lfilter
+    from hyst_model.effects.dynamics import DynamicsEffect
+    res = Resonance(330.0, 0.04, 0.3, lag, fn2=610.0, zeta2=0.03)
+    num, den = resonance_tf(res, DT)
+    assert num.sum() / den.sum() == pytest.approx(1.0, abs=1e-9)  # unit DC gain, as each mode
+    x = np.r_[0.0, np.random.default_rng(2).standard_normal(400)]
+    e = DynamicsEffect({"dt": DT, "dynamics.modes": 2})
+    want = e.output(np.array([330.0, 0.04, 0.3, lag, 610.0, 0.03]), np.arange(x.size) * DT, x, x)
+    assert np.max(np.abs(lfilter(num, den, x) - want)) < 1e-10
+
+
+def test_the_second_mode_is_read_from_the_params_only_with_two_modes():
+    from hyst_control.errors import ConfigError
+    from hyst_control.stability import identified_resonance
+    vals = {"dynamics.fn": 350.0, "dynamics.zeta": 0.04, "dynamics.part": 0.5, "dynamics.lag": 1.0,
+            "dynamics.fn2": 640.0, "dynamics.zeta2": 0.03}
+    one = identified_resonance(["dynamics"], vals)  # a node declares fn2 for every model: ignored with one mode
+    assert one == Resonance(350.0, 0.04, 0.5, 1.0)
+    two = identified_resonance(["dynamics"], vals, config={"dynamics.modes": 2.0})
+    assert (two.fn2, two.zeta2, two.lag) == (640.0, 0.03, 1.0)
+    assert identified_resonance(["dynamics"], {**vals, "dynamics.modes": 2.0}) == two  # the node's flat values
+    with pytest.raises(ConfigError, match="second mode"):
+        Resonance(350.0, 0.04, fn2=640.0, zeta2=0.0)
+
+
+class _SecondMode:
+    """A plant followed by one more lightly damped mode (the MBW's timing), stepped sample by sample (a stand-in
+    for the cascade behind one hold: close to it for modes well below Nyquist)."""
+
+    def __init__(self, plant, fn: float, zeta: float) -> None:
+        self.plant, self.dt = plant, plant.dt
+        self.num, self.den = resonance_tf(Resonance(fn, zeta), DT)
+
+    def reset(self, u0: float = 0.0) -> float:
+        y = self.plant.reset(u0)
+        self.x, self.y = [y] * 3, [y] * 2
+        return y
+
+    def step(self, u: float) -> float:
+        self.x = [self.plant.step(u)] + self.x[:2]
+        y = (float(self.num @ np.array(self.x)) - self.den[1] * self.y[0] - self.den[2] * self.y[1]) / self.den[0]
+        self.y = [y, self.y[0]]
+        return y
+
+
+@pytest.mark.parametrize("algorithm", ["dppc", "dmrac", "pid"])
+def test_default_gains_are_derated_against_both_modes_and_the_two_mode_stage_tracks(algorithm):
+    """A stage with modes at 300 and 520 Hz: the default gains are unstable against the pair (the message names
+    both), and the derated gains track 10 Hz on the simulated two-mode stage, bounded."""
+    m, res = pea_default(), Resonance(300.0, 0.02, fn2=520.0, zeta2=0.02)
+    v = guard(algorithm, DEFAULTS[algorithm], m, DT, res)
+    assert v.warn and not v.configured.stable and v.running.robust and v.derated
+    assert "300 Hz" in v.message and "520 Hz" in v.message
+    out = run_closed_loop(make_controller(algorithm, m, DT, gains=v.gains), "sine:10", 2.0,
+                          plant=_SecondMode(_resonant_plant(300.0, 0.02), 520.0, 0.02), skip=0.5)
+    assert out.finite
+    assert out.rmse < (10e-6 if algorithm == "pid" else 0.5e-6), (v.message, out.rmse)
+    e = np.abs(out.error)
+    half = e.size // 2
+    assert e[half:].max() <= 1.5 * e[:half].max() + 20e-9

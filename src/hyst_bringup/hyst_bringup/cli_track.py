@@ -180,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
         plant = _resonant(args.rate, args.seed, fn, zeta)
         resonance = Resonance(fn, zeta)
     elif spec is not None:  # an identified resonance: the gains are checked against it, as the node does
-        resonance = identified_resonance(spec.effects, spec.values, comp)
+        resonance = identified_resonance(spec.effects, spec.values, comp, spec.config)
     if resonance is not None:
         stab = guard(args.algorithm, gains if gains is not None or args.algorithm == "open_loop" else
                      make_controller(args.algorithm, model, 1.0 / args.rate).gains, model, 1.0 / args.rate,

@@ -156,7 +156,7 @@ class ControllerNode(AtomicParametersNode):
         # Every built-in effect's parameters at their identity values: a params file or a push may carry any.
         self._effect_keys = effect_parameters(1.0 / self.get_parameter("rate").value, m.u_scale, m.y_scale)
         for key, (default, txt) in self._effect_keys.items():
-            if key in ("dynamics.fn", "dynamics.zeta", "dynamics.part"):  # the resonance the stability check uses
+            if key in ("dynamics.fn", "dynamics.zeta", "dynamics.part", "dynamics.fn2", "dynamics.zeta2"):  # checked
                 txt += "; with dynamics in model.effects the gains are checked against it (hyst_control.stability)"
             desc = ParameterDescriptor(description=txt, floating_point_range=fp_range(-1e6, 1e6)) \
                 if isinstance(default, float) else ParameterDescriptor(description=txt)

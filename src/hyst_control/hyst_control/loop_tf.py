@@ -25,7 +25,9 @@ __all__ = ["Resonance", "resonance_tf", "plant_tf", "controller_tf", "reference_
 @dataclass(frozen=True)
 class Resonance:
     """Stage resonance of the ``dynamics`` effect: natural frequency ``fn`` (Hz), damping ratio ``zeta`` and the
-    participation ``part`` (share of the displacement through the mode; 1 = all of it)."""
+    participation ``part`` (share of the displacement through the mode; 1 = all of it); with ``fn2`` > 0 a second
+    mode (``fn2``, ``zeta2``) in cascade after the first, behind the same hold (``dynamics.modes: 2``), the
+    participation then being the share through both."""
 
     fn: float
     zeta: float
@@ -34,6 +36,8 @@ class Resonance:
     #: The controller's compensation inverts this mode (its Smith predictor and reference inverse run): the loop
     #: is checked as compensated (:func:`compensated_char`), where the mode is left only as a model error.
     compensated: bool = False
+    fn2: float = 0.0
+    zeta2: float = 0.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fn) and self.fn > 0 and math.isfinite(self.zeta) and self.zeta > 0):
@@ -42,6 +46,14 @@ class Resonance:
             raise ConfigError("a resonance's participation must lie in [0, 1]")
         if not (math.isfinite(self.lag) and 0.0 <= self.lag <= 1.0):
             raise ConfigError("a resonance's sampling lag must lie in [0, 1] samples")
+        if self.fn2 != 0.0 and not (math.isfinite(self.fn2) and self.fn2 > 0 and math.isfinite(self.zeta2)
+                                    and self.zeta2 > 0):
+            raise ConfigError("a second mode needs fn2 > 0 Hz and zeta2 > 0")
+
+    def describe(self) -> str:
+        """``350 Hz resonance (zeta 0.04)``, and the second mode when there is one."""
+        txt = f"{self.fn:g} Hz resonance (zeta {self.zeta:g})"
+        return txt + (f" and the {self.fn2:g} Hz one (zeta {self.zeta2:g}) after it" if self.fn2 > 0 else "")
 
 
 # -- transfer functions (coefficient arrays in q = z⁻¹, index = power) ---------------------------------------
@@ -52,16 +64,39 @@ def resonance_tf(res: Resonance, dt: float) -> tuple[np.ndarray, np.ndarray]:
 
     s_k = Φ s_{k−1} + Γa x_{k−1} + Γb x_k (Γa = Γ − Γb; lag 0: Γa = 0), y_k = s_k[0] ⇒
     G(q) = [Γb1 + (Γa1 − Φ22Γb1 + Φ12Γb2) q + (Φ12Γa2 − Φ22Γa1) q²] / [1 − tr Φ·q + det Φ·q²];
-    with participation p the reading is (1 − p) + p·G(q).
+    with participation p the reading is (1 − p) + p·G(q). Two modes: G is the cascade's (:func:`_cascade_tf`).
     """
-    phi, gam, gb = zoh_matrices(res.fn, res.zeta, dt, res.lag)
-    ga = gam - gb
-    num = np.array([gb[0], ga[0] - phi[1, 1] * gb[0] + phi[0, 1] * gb[1], phi[0, 1] * ga[1] - phi[1, 1] * ga[0]])
-    den = np.array([1.0, -np.trace(phi), np.linalg.det(phi)])
+    if res.fn2 > 0:
+        num, den = _cascade_tf(res, dt)
+    else:
+        num, den = _mode_tf(res.fn, res.zeta, res.lag, dt)
     p = float(res.part)
     if p != 1.0:
         num = p * num + (1.0 - p) * den
     return num, den
+
+
+def _mode_tf(fn: float, zeta: float, lag: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """One mode's G(q) of :func:`resonance_tf` (participation 1)."""
+    phi, gam, gb = zoh_matrices(fn, zeta, dt, lag)
+    ga = gam - gb
+    num = np.array([gb[0], ga[0] - phi[1, 1] * gb[0] + phi[0, 1] * gb[1], phi[0, 1] * ga[1] - phi[1, 1] * ga[0]])
+    return num, np.array([1.0, -np.trace(phi), np.linalg.det(phi)])
+
+
+def _cascade_tf(res: Resonance, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two modes in cascade, discretised as one system (the effect's four-state ``zoh_matrices``): with
+    s_k = Φ s_{k−1} + Γa x_{k−1} + Γb x_k and y_k = C s_k, G(q) = C(I − Φq)⁻¹(Γb + Γa q) =
+    [z·C adj(zI − Φ)Γb + C adj(zI − Φ)Γa] / det(zI − Φ), whose coefficients in descending z are those in q."""
+    from scipy.signal import ss2tf
+    phi, gam, gb = zoh_matrices(res.fn, res.zeta, dt, res.lag, (res.fn2, res.zeta2))
+    c = np.zeros((1, phi.shape[0]))
+    c[0, phi.shape[0] - 2] = 1.0  # the second mode's displacement
+    nb, den = ss2tf(phi, gb.reshape(-1, 1), c, np.zeros((1, 1)))
+    na, _ = ss2tf(phi, (gam - gb).reshape(-1, 1), c, np.zeros((1, 1)))
+    nb, na = np.ravel(nb), np.ravel(na)  # length ns + 1, leading coefficient 0 (strictly proper)
+    num = np.r_[nb[1:], 0.0] + na
+    return num, np.ravel(den)
 
 
 def _mu_max(model: MBWParams, u_lo: float, u_hi: float) -> float:

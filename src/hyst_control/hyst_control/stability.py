@@ -66,18 +66,25 @@ class StabilityError(ConfigError):
     """The configured gains make the loop unstable against the identified resonance and the policy refuses."""
 
 
-def identified_resonance(effects, values, compensation=None) -> Resonance | None:
+def identified_resonance(effects, values, compensation=None, config=None) -> Resonance | None:
     """The stage resonance a model holds: ``dynamics`` in ``effects`` with ``dynamics.fn`` and ``dynamics.zeta``
     in ``values`` (SI); None when it has none. The one reading the node, ``hyst track`` and the benches share.
     ``compensation`` (a :class:`~hyst_control.compensation.Compensation`): the controller's; when it inverts the
-    mode the resonance is marked ``compensated`` (checked as the compensated loop)."""
+    mode the resonance is marked ``compensated`` (checked as the compensated loop). ``dynamics.modes`` (in
+    ``config`` or ``values``) 2: the second mode (``dynamics.fn2``, ``zeta2``) is part of it."""
     if "dynamics" not in effects:
         return None
     fn, zeta = values.get("dynamics.fn"), values.get("dynamics.zeta")
     part = values.get("dynamics.part", 1.0)  # files from before the participation: the whole motion
     lag = values.get("dynamics.lag", 0.0)    # ... and before the sampling lag: read at the end of the hold
     comp = compensation is not None and "dynamics" in getattr(compensation, "names", ())
-    return Resonance(float(fn), float(zeta), float(part), float(lag), comp) if fn and zeta else None
+    if not (fn and zeta):
+        return None
+    modes = {**values, **(config or {})}.get("dynamics.modes", 1)
+    second = {}
+    if int(float(modes)) == 2:
+        second = {"fn2": float(values["dynamics.fn2"]), "zeta2": float(values["dynamics.zeta2"])}
+    return Resonance(float(fn), float(zeta), float(part), float(lag), comp, **second)
 
 
 @dataclass(frozen=True)
@@ -138,8 +145,8 @@ def _pairs(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | 
         pn, pd = plant_tf(model, dt, None, mu)
         return [(np.polymul(cd, pd), np.concatenate(([0.0], np.polymul(cn, pn))))]
     df, kz = MODE_TOLERANCE
-    stages = [replace(res, fn=res.fn * f, zeta=res.zeta * z) for f in (1.0, 1.0 - df, 1.0 + df)
-              for z in (1.0, 1.0 / kz, kz)]
+    stages = [replace(res, fn=res.fn * f, zeta=res.zeta * z, fn2=res.fn2 * f, zeta2=res.zeta2 * z)
+              for f in (1.0, 1.0 - df, 1.0 + df) for z in (1.0, 1.0 / kz, kz)]
     if res.compensated:
         return [compensated_char(algorithm, gains, model, dt, res, st, mu) for st in stages]
     if not _notched(algorithm, gains):  # the raw loop relies on nothing but the gain: the mode as identified
@@ -292,7 +299,7 @@ def guard(algorithm: str, gains, model: MBWParams, dt: float, res: Resonance | N
     if res is None:
         return StabilityVerdict(algorithm, gains, None, None)
     chk = check_loop(algorithm, gains, model, dt, res, gain_margin, v_range)
-    where = f"{algorithm} against the {res.fn:g} Hz resonance (zeta {res.zeta:g})"
+    where = f"{algorithm} against the {res.describe()}"
     if res.compensated:  # the user can tell which loop was judged
         df, kz = MODE_TOLERANCE
         where += (f", compensated (the loop with its inverse, for a stage mode within fn ±{df:.0%}, "

@@ -243,7 +243,8 @@ def test_feedback_structure_marks_the_base_recursion_inactive():
     # series dynamics and rate (which reads the BW parameters) leave everything active
     assert build_model("mbw", ["dynamics"], cfg).inactive == ()
     assert build_model("bw", ["rate"], cfg).inactive == ()
-    assert [v["dynamics.structure"] for v in DynamicsEffect.variants()] == ["series", "feedback"]
+    assert [(v["dynamics.structure"], v["dynamics.modes"]) for v in DynamicsEffect.variants()] == [
+        ("series", 1.0), ("feedback", 1.0), ("series", 2.0)]
 
 
 def test_bad_configuration_is_one_clear_error():
@@ -253,6 +254,10 @@ def test_bad_configuration_is_one_clear_error():
         DynamicsEffect({"dynamics.interp": "cubic"})
     with pytest.raises(EffectError, match="hold"):
         DynamicsEffect({"dynamics.hold": "soh"})
+    with pytest.raises(EffectError, match="modes must be 1 or 2"):
+        DynamicsEffect({"dynamics.modes": 3})
+    with pytest.raises(EffectError, match="only in the series"):
+        DynamicsEffect({"dynamics.structure": "feedback", "dynamics.modes": 2})
     with pytest.raises(EffectError, match="replaces the base"):
         build_model("bw", ["rate", "dynamics"], {"dynamics.structure": "feedback"})
 

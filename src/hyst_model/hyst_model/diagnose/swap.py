@@ -25,7 +25,7 @@ from ..model import Model
 from .ladder import effect_order
 from .parallel import pmap
 from .refit import _effect_values, _simulate, paired_t, rmse
-from .stages import Rung, Setup, own_config, refit_from_final
+from .stages import Rung, Setup, own_config, refit_from_final, validate_alike
 
 __all__ = ["swap", "alone_significant"]
 
@@ -87,8 +87,8 @@ def swap(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], ch
     options = [(r_full, "", "", m_full, th_full, e_full)] + trials
     best = min(range(len(options)), key=lambda i: options[i][0])
     r_b, e_b = options[best][0], options[best][5]
-    alike = [i for i in range(len(options)) if i == best or options[i][0] < s.min_factor * r_b
-             or paired_t(options[i][5][val], e_b[val]) < s.t_min]
+    alike = [i for i in range(len(options))
+             if i == best or validate_alike(s, options[i][0], r_b, paired_t(options[i][5][val], e_b[val]))]
     pick = min(alike, key=lambda i: (len(options[i][3].names), options[i][0], i))
     if pick == 0:
         return chosen, False

@@ -29,6 +29,11 @@ The mode is discretised exactly, starting at rest at ``x[0]``, for one of two in
   anywhere between (:func:`~.dynamics_kernels.zoh_matrices`);
 * ``foh`` — the input is linear between samples (first-order hold), right for smooth, band-limited inputs.
 
+With ``dynamics.modes: 2`` a second mode (``fn2``, ``zeta2``) is driven by the first's displacement — the flexure
+and, say, the sensor mount both resonate — and ``part`` is the share through both. The cascade is discretised as
+one four-state system with one hold and one ``lag`` (a stage between one DAC and one ADC has one hold however many
+modes it has; discretising each mode on its own would put one more sample of delay between them).
+
 On the simulated PEA stage with a hidden 350 Hz resonance (ζ = 0.04) the two differ by 0.9 µm RMS: a lightly
 damped resonance near Nyquist is sensitive to what the input does between samples. With ``fn`` near Nyquist and
 ζ ≈ 0.7 either is almost the identity. This is a piezo stage whose flexure resonance (hundreds of Hz to kHz) is
@@ -135,6 +140,11 @@ class DynamicsEffect(Effect):
         self.hold = str(cfg.get("dynamics.hold", "zoh"))
         if self.hold not in HOLDS:
             raise EffectError(f"dynamics.hold must be one of {', '.join(HOLDS)}, not {self.hold!r}")
+        self.modes = int(float(cfg.get("dynamics.modes", 1)))
+        if self.modes not in (1, 2):
+            raise EffectError(f"dynamics.modes must be 1 or 2, not {cfg.get('dynamics.modes')!r}")
+        if self.modes == 2 and self.structure != "series":
+            raise EffectError("dynamics.modes: 2 (a second mode in cascade) exists only in the series structure")
         self.interp = str(cfg.get("dynamics.interp", "linear"))
         if self.interp not in ("linear", "fft"):
             raise EffectError(f"dynamics.interp must be 'linear' or 'fft', not {self.interp!r}")
@@ -148,7 +158,7 @@ class DynamicsEffect(Effect):
 
     def config(self) -> dict[str, float | str]:
         return {"structure": self.structure, "hold": self.hold, "substeps": float(self.substeps),
-                "interp": self.interp}
+                "interp": self.interp, "modes": float(self.modes)}
 
     @property
     def _lagged(self) -> bool:
@@ -163,9 +173,13 @@ class DynamicsEffect(Effect):
         return {"part": 1.0, "lag": 0.0} if self._lagged else {"part": 1.0}
 
     @staticmethod
-    def variants() -> list[dict[str, str]]:
-        """Configurations ``hyst diagnose`` tries, keeping whichever validates better: both structures."""
-        return [{"dynamics.structure": s} for s in STRUCTURES]
+    def variants() -> list[dict[str, object]]:
+        """Configurations ``hyst diagnose`` tries, keeping whichever validates better: both structures, and the
+        series structure with two modes in cascade (a stage whose flexure and sensor mount both resonate: one
+        mode fitted to two left 6x the noise floor where a delay imitated their joint phase lag better)."""
+        return [{"dynamics.structure": "series", "dynamics.modes": 1.0},
+                {"dynamics.structure": "feedback", "dynamics.modes": 1.0},
+                {"dynamics.structure": "series", "dynamics.modes": 2.0}]
 
     def params(self) -> tuple[Param, ...]:
         fs = 1.0 / self.dt
@@ -177,7 +191,7 @@ class DynamicsEffect(Effect):
                     Param("part", 1.0, 0.0, 1.0, "", "participation: share of the displacement through the mode"),
                     ) + ((Param("lag", 0.0, 0.0, 1.0, "sample", "where the sensor samples within the input's hold "
                                 "(0: at its end, the MBW's timing; 1: one period later, the textbook ZOH)"),)
-                         if self._lagged else ())
+                         if self._lagged else ()) + self._second_params(fs)
         gref = self.y_scale / self.u_scale
         yref = 10.0 * self.y_scale
         return (Param("fn", 0.05 * fs, 0.2, nyq, "Hz", "small-signal natural frequency sqrt((k+α)/m)/2π"),
@@ -186,6 +200,14 @@ class DynamicsEffect(Effect):
                 Param("share", 0.5, 0.0, 0.999, "", "hysteretic share α/(k+α) of the stiffness"),
                 Param("bg", 0.0, -200.0 / yref, 200.0 / yref, "1/m", "Bouc-Wen β·γ (loop shape)"),
                 Param("bd", 0.0, -200.0 / yref, 200.0 / yref, "1/m", "Bouc-Wen β·δ (loop shape)"))
+
+    def _second_params(self, fs: float) -> tuple[Param, ...]:
+        """The second mode's parameters (``dynamics.modes: 2``), last in θ; none for one mode."""
+        if self.modes == 1:
+            return ()
+        return (Param("fn2", 0.45 * fs, SERIES_FN_MIN, 0.49 * fs, "Hz",
+                      "natural frequency of the second mode, in cascade after the first"),
+                Param("zeta2", 0.7, 1e-3, 1.0, "", "damping ratio of the second mode"))
 
     def check(self, base, others) -> None:
         super().check(base, others)
@@ -222,7 +244,9 @@ class DynamicsEffect(Effect):
         x = np.asarray(y, dtype=np.float64)
         dt = sample_time(t) if t.size > 1 else self.dt
         lag = float(theta[3]) if self._lagged else 0.0
-        ym = series_filter(x, float(theta[0]), float(theta[1]), dt, self.hold, lag)
+        k = 4 if self._lagged else 3  # the second mode's fn2, zeta2 follow lag
+        ym = series_filter(x, float(theta[0]), float(theta[1]), dt, self.hold, lag,
+                           (float(theta[k]), float(theta[k + 1])) if self.modes == 2 else None)
         part = float(theta[2])
         return ym if part == 1.0 else x + part * (ym - x)
 
@@ -249,6 +273,10 @@ class DynamicsEffect(Effect):
         the unit circle (a diagnosis can name such a mode: refusing the whole model for it left the controllers
         nothing; the gains are still checked against the mode, :mod:`hyst_control.stability`)."""
         if self.structure != "series" or self.hold != "zoh" or base is None:
+            return None
+        if self.modes == 2:
+            self.online_note = ("two modes in cascade have no per-sample inverse here; they act on the loop as "
+                                "unmodelled dynamics (the controller checks its gains against both)")
             return None
         fn, zeta, part, lag = (float(v) for v in theta[:4])
         try:
@@ -294,6 +322,8 @@ class DynamicsEffect(Effect):
                         if np.isfinite(c) and c < best[0]:
                             best = (c, {"fn": float(fn), "zeta": float(z), "part": part}
                                     | ({"lag": lag} if self._lagged else {}))
+            if self.modes == 2 and best[1] is not None:
+                best = self._second_start(x, ex, dt, grid, zetas, best)
             return best[1] or {}
         # feedback: the linear MSD (bg = bd = 0) with the compliance fitted by least squares, per (fn, ζ).
         u = np.asarray(u, dtype=np.float64)
@@ -312,6 +342,25 @@ class DynamicsEffect(Effect):
                 if c < best[0]:
                     best = (c, {"fn": float(fn), "zeta": float(z), "gain": g, "share": 0.5, "bg": 0.0, "bd": 0.0})
         return best[1] or {}
+
+    def _second_start(self, x: np.ndarray, ex: np.ndarray, dt: float, grid: np.ndarray, zetas: tuple,
+                      best: tuple) -> tuple:
+        """The second mode's start: the first held at its best single-mode start, the second scanned on the same
+        grid (participation by least squares again); near the identity (fast, damped) when none helps."""
+        v = best[1]
+        out = (np.inf, {**v, "fn2": float(grid[-1]), "zeta2": 0.7})
+        for fn in grid:
+            for z in zetas:
+                d = series_filter(x, v["fn"], v["zeta"], dt, self.hold, v.get("lag", 0.0), (fn, z)) - x
+                den = float(d @ d)
+                if not (np.isfinite(den) and den > 0):
+                    continue
+                part = float(np.clip((d @ ex) / den, 0.0, 1.0))
+                r = ex - part * d
+                c = float(r @ r)
+                if np.isfinite(c) and c < out[0]:
+                    out = (c, {**v, "part": part, "fn2": float(fn), "zeta2": float(z)})
+        return out
 
     def signature(self, t, u, residual, dt):
         """Dynamics leaves a residual that follows the input's acceleration, beyond its velocity, or rings after

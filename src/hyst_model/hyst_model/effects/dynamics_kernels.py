@@ -15,27 +15,37 @@ __all__ = ["series_filter", "zoh_matrices", "msd_bw_simulate", "upsample", "HOLD
 
 HOLDS = ("zoh", "foh")
 
-def _expm_with_input(fn: float, zeta: float, dt: float, ramp: bool) -> np.ndarray:
-    """exp(M·dt) of the resonance (y, ẏ) augmented by its input (held, or a ramp: input and slope states)."""
-    wn = 2.0 * np.pi * fn
-    n = 4 if ramp else 3
+def _expm_with_input(fn: float, zeta: float, dt: float, ramp: bool,
+                     second: tuple[float, float] | None = None) -> np.ndarray:
+    """exp(M·dt) of the resonance (y, ẏ) augmented by its input (held, or a ramp: input and slope states).
+
+    ``second = (fn2, zeta2)``: a second mode driven by the first's displacement, states (y1, ẏ1, y2, ẏ2) — the
+    cascade discretised as one system (a stage between one DAC and one ADC has one hold, whatever its modes).
+    """
+    modes = [(fn, zeta)] + ([second] if second is not None else [])
+    ns = 2 * len(modes)
+    n = ns + (2 if ramp else 1)
     M = np.zeros((n, n))
-    M[0, 1] = 1.0
-    M[1, 0] = -wn * wn
-    M[1, 1] = -2.0 * zeta * wn
-    M[1, 2] = wn * wn
+    for i, (f, z) in enumerate(modes):
+        wn = 2.0 * np.pi * f
+        M[2 * i, 2 * i + 1] = 1.0
+        M[2 * i + 1, 2 * i] = -wn * wn
+        M[2 * i + 1, 2 * i + 1] = -2.0 * z * wn
+        M[2 * i + 1, ns if i == 0 else 2 * i - 2] = wn * wn  # driven by the input, or by the mode before
     if ramp:
-        M[2, 3] = 1.0  # input slope state
+        M[ns, ns + 1] = 1.0  # input slope state
     return expm(M * dt)
 
 
-def _foh_matrices(fn: float, zeta: float, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _foh_matrices(fn: float, zeta: float, dt: float, second: tuple[float, float] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact discretisation of ωn²/(s²+2ζωn s+ωn²) for a piecewise-linear input: Φ, Γ1, Γ2 (see series_filter)."""
-    E = _expm_with_input(fn, zeta, dt, ramp=True)
-    return E[:2, :2].copy(), E[:2, 2].copy(), E[:2, 3].copy() / dt
+    E = _expm_with_input(fn, zeta, dt, ramp=True, second=second)
+    ns = 2 if second is None else 4
+    return E[:ns, :ns].copy(), E[:ns, ns].copy(), E[:ns, ns + 1].copy() / dt
 
 
-def zoh_matrices(fn: float, zeta: float, dt: float, lag: float = 0.0
+def zoh_matrices(fn: float, zeta: float, dt: float, lag: float = 0.0, second: tuple[float, float] | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact discretisation for a held input: ``s_{k+1} = Φ s_k + (Γ − Γ_b) x_k + Γ_b x_{k+1}``; returns Φ, Γ, Γ_b.
 
@@ -46,12 +56,13 @@ def zoh_matrices(fn: float, zeta: float, dt: float, lag: float = 0.0
     stage for the first ``lag``·Δt of the period (Γ_b = ∫₀^{(1−lag)Δt} e^{Aτ}B dτ). Written in the first-order-
     hold form of :func:`_series_run` (Γ1 = Γ, Γ2 = Γ_b: Γ1 x_k + Γ2 (x_{k+1} − x_k)).
     """
-    E = _expm_with_input(fn, zeta, dt, ramp=False)
-    g = E[:2, 2].copy()
+    ns = 2 if second is None else 4  # ``second``: the cascade of two modes, states (y1, ẏ1, y2, ẏ2)
+    E = _expm_with_input(fn, zeta, dt, ramp=False, second=second)
+    g = E[:ns, ns].copy()
     if lag <= 0.0:
-        return E[:2, :2].copy(), g, g.copy()
-    gb = _expm_with_input(fn, zeta, (1.0 - min(lag, 1.0)) * dt, ramp=False)[:2, 2].copy()
-    return E[:2, :2].copy(), g, gb
+        return E[:ns, :ns].copy(), g, g.copy()
+    gb = _expm_with_input(fn, zeta, (1.0 - min(lag, 1.0)) * dt, ramp=False, second=second)[:ns, ns].copy()
+    return E[:ns, :ns].copy(), g, gb
 
 
 @njit(cache=True, nogil=True)
@@ -72,23 +83,50 @@ def _series_run(phi: np.ndarray, g1: np.ndarray, g2: np.ndarray, x: np.ndarray) 
     return y
 
 
+@njit(cache=True, nogil=True)
+def _cascade_run(phi: np.ndarray, g1: np.ndarray, g2: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """:func:`_series_run` for any number of states, reading the last mode's displacement (state ns − 2)."""
+    n = x.size
+    ns = phi.shape[0]
+    y = np.empty(n)
+    if n == 0:
+        return y
+    s = np.zeros(ns)
+    for i in range(0, ns, 2):
+        s[i] = x[0]  # at rest at x[0]: every mode displaced by it, unit DC gain each
+    sn = np.empty(ns)
+    y[0] = x[0]
+    for k in range(n - 1):
+        dx = x[k + 1] - x[k]
+        for i in range(ns):
+            acc = g1[i] * x[k] + g2[i] * dx
+            for j in range(ns):
+                acc += phi[i, j] * s[j]
+            sn[i] = acc
+        s[:] = sn
+        y[k + 1] = s[ns - 2]
+    return y
+
+
 def series_filter(x: np.ndarray, fn: float, zeta: float, dt: float, hold: str = "foh",
-                  lag: float = 0.0) -> np.ndarray:
+                  lag: float = 0.0, second: tuple[float, float] | None = None) -> np.ndarray:
     """Pass ``x`` through the unit-DC-gain second-order low-pass (fn Hz, damping ζ), at rest at ``x[0]``.
 
     ``hold='foh'``: ``s_{k+1} = Φ s_k + Γ1 x_k + Γ2 (x_{k+1} − x_k)`` for the state s = (y, ẏ), exact when x is
     linear between samples; ``hold='zoh'``: ``s_{k+1} = Φ s_k + Γ x_{k+1}``, exact when x_{k+1} is held over
     the period that ends at sample k+1 (``lag`` > 0: the sensor samples ``lag`` periods after the hold starts,
-    see :func:`zoh_matrices`; ``foh`` takes no lag).
+    see :func:`zoh_matrices`; ``foh`` takes no lag). ``second = (fn2, zeta2)``: a second unit-DC-gain mode
+    driven by the first, the cascade discretised as one system; the output is the second mode's displacement.
     """
     x = np.ascontiguousarray(x, dtype=np.float64)
     if hold not in HOLDS:
         raise EffectError(f"dynamics.hold must be one of {', '.join(HOLDS)}, not {hold!r}")
+    sec = None if second is None else (float(second[0]), float(second[1]))
     if hold == "zoh":
-        phi, g1, g2 = zoh_matrices(float(fn), float(zeta), float(dt), float(lag))
+        phi, g1, g2 = zoh_matrices(float(fn), float(zeta), float(dt), float(lag), sec)
     else:
-        phi, g1, g2 = _foh_matrices(float(fn), float(zeta), float(dt))
-    return _series_run(phi, g1, g2, x)
+        phi, g1, g2 = _foh_matrices(float(fn), float(zeta), float(dt), sec)
+    return _series_run(phi, g1, g2, x) if sec is None else _cascade_run(phi, g1, g2, x)
 
 
 # ---------------------------------------------------------------------------------------------- feedback

@@ -33,11 +33,17 @@ def _frac_delay(v: np.ndarray, d: float) -> np.ndarray:
     return np.interp(k, np.arange(v.size), v, left=v[0])
 
 
-def _mode(x: np.ndarray, dt: float, fn: float, zeta: float) -> np.ndarray:
+def _mode(x: np.ndarray, dt: float, fn: float, zeta: float, then: tuple[float, float] | None = None) -> np.ndarray:
+    """x through ω²/(s² + 2ζωs + ω²) behind a zero-order hold; ``then = (fn2, zeta2)``: a second mode after it, the
+    cascade discretised as one system (one hold: the stage sits between one DAC and one ADC)."""
     w = 2 * np.pi * fn
-    num, den, _ = cont2discrete(([w * w], [1.0, 2 * zeta * w, w * w]), dt, method="zoh")
+    num, den = np.array([w * w]), np.array([1.0, 2 * zeta * w, w * w])
+    if then is not None:
+        w2 = 2 * np.pi * then[0]
+        num, den = np.array([w * w * w2 * w2]), np.polymul(den, [1.0, 2 * then[1] * w2, w2 * w2])
+    numd, dend, _ = cont2discrete((num, den), dt, method="zoh")
     x0 = x[0]
-    return x0 + lfilter(np.ravel(num), den, x - x0)
+    return x0 + lfilter(np.ravel(numd), dend, x - x0)
 
 
 def creep_log(c, a):            # log law after every input change (superposed step responses), per decade
@@ -75,9 +81,10 @@ def mode1(c, a):                # one lightly damped mode, a share of the motion
     return c.u, c.x + a * (m - c.x)
 
 
-def mode2(c, a):                # two modes in cascade
+def mode2(c, a):                # two modes in cascade, behind one hold
+    # (each mode discretised on its own put a second sample of delay between them, which no stage has)
     dt = c.t[1] - c.t[0]
-    m = _mode(_mode(c.x, dt, c.draw["fn"], c.draw["zeta"]), dt, c.draw["fn"] * c.draw["ratio"], c.draw["zeta"])
+    m = _mode(c.x, dt, c.draw["fn"], c.draw["zeta"], then=(c.draw["fn"] * c.draw["ratio"], c.draw["zeta"]))
     return c.u, c.x + a * (m - c.x)
 
 
