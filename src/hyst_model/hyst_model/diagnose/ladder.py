@@ -13,7 +13,7 @@ from ..errors import EffectError, FitError
 from ..model import Model
 from .parallel import pmap
 from .refit import _effect_values, guarded_refit, paired_t, refit, rmse
-from .stages import Candidate, Rung, Setup, _label, effect_variants, own_config, screen_on
+from .stages import Candidate, Rung, Setup, effect_variants, own_config, screen_on, variant_label
 
 __all__ = ["climb", "prefer_simpler", "n_params", "effect_order", "STRONG_SIGNATURE", "SIGNATURE_MARGIN",
            "OTHER_ORDER_TOP"]
@@ -210,7 +210,7 @@ def _variant_label(var: dict) -> str:
     """`` (form kink)`` for ``{"asymmetry.form": "kink"}``; empty for an effect with one configuration."""
     if not var:
         return ""
-    return " (" + _label(var) + ")"
+    return " (" + variant_label(var) + ")"
 
 
 #: How many of a rung's best refits are also tried with the new effect innermost (:func:`_other_order`).

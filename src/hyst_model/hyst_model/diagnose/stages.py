@@ -23,7 +23,7 @@ from .parallel import pmap
 from .unexplained import Unexplained, explain_unexplained
 
 __all__ = ["Candidate", "Rung", "Setup", "screen_on", "screen_all", "refit_all", "rebase", "verdict",
-           "effect_variants", "own_config", "refit_from_final", "validate_alike"]
+           "effect_variants", "own_config", "refit_from_final", "validate_alike", "variant_label"]
 
 
 @dataclass
@@ -187,7 +187,7 @@ def screen_on(s: Setup, inner: Model, th_inner: np.ndarray, chosen: list, nm: st
     return r, vals, None
 
 
-def _label(vv: dict) -> str:
+def variant_label(vv: dict) -> str:
     """``structure series, modes 2`` for ``{"dynamics.structure": "series", "dynamics.modes": 2.0}``."""
     return ", ".join(f"{k.split('.', 1)[-1]} {v:g}" if isinstance(v, float) else f"{k.split('.', 1)[-1]} {v}"
                      for k, v in vv.items())
@@ -281,8 +281,8 @@ def _screened(s: Setup, nm: str, results: list[dict]) -> tuple[Candidate, dict |
         if len(tried) > 1 and done is None and tried[1][3] is None and np.isfinite(tried[1][0]):
             runner_up = (tried[1][2], tried[1][1])
         if len(tried) > 1:
-            ev += ("; tried " + " and ".join(f"{_label(vv)} ({fmt_len(rv)} on validation)"
-                                             for rv, vv, _, _ in tried) + f": kept {_label(var)}")
+            ev += ("; tried " + " and ".join(f"{variant_label(vv)} ({fmt_len(rv)} on validation)"
+                                             for rv, vv, _, _ in tried) + f": kept {variant_label(var)}")
     else:
         r = math.inf
         ev = f"{ev}; the fit failed: {'; '.join(x['error'] for x in results)}"
@@ -333,7 +333,8 @@ def _refit_each(s: Setup, cands: dict, carry: dict, full: dict) -> None:
 
     With the base held fixed the screens rank an effect's configurations by what they add to a base that has
     already bent towards the effect: two modes in cascade screened worse than one (56.4 against 38.6 nm) on a
-    generated stage with two modes, where refitted jointly they reach the noise floor and one mode 11.3 nm.
+    generated stage with two modes (2000147, the generator's earlier form of them), where refitted jointly they
+    reached the noise floor and one mode 11.3 nm.
     """
     order = sorted(cands.values(), key=lambda c: c.rmse)
     todo = [c.effect for c in order if c.effect not in full and np.isfinite(c.rmse)]
@@ -346,11 +347,11 @@ def _refit_each(s: Setup, cands: dict, carry: dict, full: dict) -> None:
         nm, vals, var = item
         if var is not None:
             own.cfg.update(var)
-        return _refit_one(own, nm, vals, f" ({_label(var)})" if var else "")
+        return _refit_one(own, nm, vals, f" ({variant_label(var)})" if var else "")
     for (nm, _, var), res in zip(items, pmap(s, one, items)):
-        if res is not None and (nm not in full or _better_config(s, res, full[nm], nm)):
+        if res is not None and (nm not in full or _better_config(s, res, full[nm])):
             if nm in full:
-                cands[nm].evidence += (f"; refitted jointly with the base, {_label(var or {})} was kept "
+                cands[nm].evidence += (f"; refitted jointly with the base, {variant_label(var or {})} was kept "
                                        f"({fmt_len(rmse(res[2][s.val]))} on validation against "
                                        f"{fmt_len(rmse(full[nm][2][s.val]))}, {len(res[1])} parameters against "
                                        f"{len(full[nm][1])})")
@@ -369,8 +370,8 @@ def validate_alike(s: Setup, r: float, r_best: float, t: float) -> bool:
     return t < s.t_min or r < s.min_factor * r_best
 
 
-def _better_config(s: Setup, new: tuple, old: tuple, nm: str) -> bool:
-    """Whether the joint refit ``new`` (model, θ, residual) of effect ``nm`` in another configuration replaces
+def _better_config(s: Setup, new: tuple, old: tuple) -> bool:
+    """Whether the joint refit ``new`` (model, θ, residual) of an effect in another configuration replaces
     ``old``: it validates better, unless only alike (:func:`validate_alike`) with more parameters; or it
     validates alike with fewer (one mode where two add nothing the record shows)."""
     r_new, r_old = rmse(new[2][s.val]), rmse(old[2][s.val])
