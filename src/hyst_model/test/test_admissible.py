@@ -35,6 +35,27 @@ def test_thesis_table_4_1_is_admissible_and_a_violation_is_named():
     assert any(s.startswith("psi2") and "lower bound" in s for s in check_admissible(m, th_edge).at_bounds)
 
 
+def test_a_model_that_diverges_within_its_record_range_is_reported():
+    """The probe (identify.admissible.probe_bounded) runs the model on inputs within the record's range; a fit
+    that is finite on its record and diverges off it is reported, never silent. Without a record nothing is probed."""
+    m = _model()
+    p = pea_default()
+    vals = {**p.to_dict(), "offset": 0.0}
+    th = np.array([vals[n] for n in m.names])
+    t = np.arange(4000) * 5e-4
+    u = 75 + 60 * np.sin(2 * np.pi * 2 * t)
+    y = m.simulate(th, t, u)
+    ok = check_admissible(m, th, record=(t, u, y))
+    assert ok.bounded is True and ok.clean and ok.divergence == ""
+    th_bad = th.copy()
+    th_bad[m.names.index("alpha1")] = 3.0  # finite on a sine, not on steps between the range's ends
+    assert np.all(np.isfinite(m.simulate(th_bad, t, u)))
+    bad = check_admissible(m, th_bad, record=(t, u, y))
+    assert bad.bounded is False and not bad.clean
+    assert "steps between its ends" in bad.divergence and bad.controllers.startswith("unstable off its record")
+    assert check_admissible(m, th_bad).bounded is None
+
+
 def test_hyst_fit_reports_admissibility_in_json_and_text(tmp_path, capsys):
     t = np.arange(4000) * 5e-4
     u = 75 + 60 * np.sin(2 * np.pi * 2 * t) + 10 * np.sin(2 * np.pi * 9 * t)
@@ -43,7 +64,8 @@ def test_hyst_fit_reports_admissibility_in_json_and_text(tmp_path, capsys):
     write_csv(csv, {"t": t, "u": u, "y": y})
     assert main(["fit", str(csv), "--json", "--quiet"]) == 0
     adm = json.loads(capsys.readouterr().out)["admissibility"]
-    assert set(adm) == {"remark_4_1", "violations", "at_bounds", "controllers"} and adm["controllers"]
+    assert set(adm) == {"remark_4_1", "violations", "at_bounds", "controllers", "bounded", "divergence"}
+    assert adm["controllers"] and adm["bounded"] is True and adm["divergence"] == ""
     assert main(["fit", str(csv), "--quiet"]) == 0
     assert "controllers:" in capsys.readouterr().out
 
@@ -61,7 +83,8 @@ def test_hyst_diagnose_checks_the_model_it_hands_on_as_hyst_fit_does(tmp_path, c
     main(["diagnose", str(csv), "--json", "--quiet", "--out", str(out)])
     obj = json.loads(capsys.readouterr().out)
     adm = obj["admissibility"]
-    assert set(adm) == {"remark_4_1", "violations", "at_bounds", "controllers"} and adm["controllers"]
+    assert set(adm) == {"remark_4_1", "violations", "at_bounds", "controllers", "bounded", "divergence"}
+    assert adm["controllers"] and adm["bounded"] is True and adm["divergence"] == ""
     spec = yaml.safe_load(out.read_text())
     assert adm["controllers"] in json.dumps(spec, ensure_ascii=False)  # the params file says the same
     main(["diagnose", str(csv), "--quiet"])

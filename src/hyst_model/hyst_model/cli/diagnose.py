@@ -115,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
     # The model diagnose hands on is checked as hyst fit checks its fit (one path): Remark 4.1 and parameters on
     # their bounds, in the text, the JSON and the params file's provenance.
     from ..identify.admissible import check_admissible
-    adm = check_admissible(*d.models[d.ladder[-1].model])
+    fm, fth = d.models[d.ladder[-1].model]
+    adm = check_admissible(fm, fth, record=(rec.t, rec.u, rec.y))
     out_path = None
     if args.out:
         from ..io import spec_from_model, write_params

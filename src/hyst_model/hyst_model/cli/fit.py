@@ -183,7 +183,7 @@ def run(args) -> int:
     res = fit(model, rec.t, rec.u, rec.y, method=args.method, seed=args.seed, split=split,
               progress=not args.quiet, **options)
     from ..identify.admissible import check_admissible
-    adm = check_admissible(model, res.theta)
+    adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
     constrained = None
     if args.admissible and adm.remark_4_1 is None:
         raise HystError(f"--admissible: model {args.model} has no alpha/psi terms; Remark 4.1 does not apply")
@@ -198,12 +198,12 @@ def run(args) -> int:
         res.rmse = float(np.sqrt(np.mean(e[sp.val_index()] ** 2))) if sp.has_validation else res.rmse
         res.rmse_train = float(np.sqrt(np.mean(e[sp.train_index()] ** 2)))
         constrained = {"free_rmse": free.rmse, "free_violations": adm.violations, "rmse": res.rmse}
-        adm = check_admissible(model, theta_c)
+        adm = check_admissible(model, theta_c, record=(rec.t, rec.u, rec.y))
         if not args.quiet:
             print(f"hyst fit: Remark 4.1 enforced: validation RMSE {res.rmse * 1e9:.2f} nm "
                   f"(free fit {free.rmse * 1e9:.2f} nm, which violated it)", file=sys.stderr)
     if not adm.clean and not args.json:
-        for line in adm.violations + [f"{b}" for b in adm.at_bounds]:
+        for line in adm.violations + [f"{b}" for b in adm.at_bounds] + ([adm.divergence] if adm.divergence else []):
             print(f"hyst fit: warning: {line}", file=sys.stderr)
     if out is not None:
         prov = {"method": args.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": str(args.data),
