@@ -13,7 +13,7 @@ from ..errors import EffectError, FitError
 from ..model import Model
 from .parallel import pmap
 from .refit import _effect_values, guarded_refit, paired_t, refit, rmse
-from .stages import Candidate, Rung, Setup, effect_variants, own_config, screen_on, variant_label
+from .stages import Candidate, Rung, Setup, effect_variants, own_config, screen_on, variant_suffix
 
 __all__ = ["climb", "prefer_simpler", "n_params", "effect_order", "STRONG_SIGNATURE", "SIGNATURE_MARGIN",
            "OTHER_ORDER_TOP"]
@@ -111,7 +111,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
                 r_s, vals, full_s = screen_on(own, prev_m, prev_th, order, nm, carry.get(nm))
             except (EffectError, FitError):
                 return None
-            own.say(f"screen {prev_m.name}+{nm}{_variant_label(var)}: validation RMSE {fmt_len(r_s)}", step=False)
+            own.say(f"screen {prev_m.name}+{nm}{variant_suffix(var)}: validation RMSE {fmt_len(r_s)}", step=False)
             return r_s, nm, vals, full_s, var
 
         best_s: dict[str, tuple] = {}
@@ -153,7 +153,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
             if not options:
                 return None
             mm, tth, e = min(options, key=lambda o: rmse(o[2][val]))  # the refit on a tie
-            own.say(f"refit {mm.name}{_variant_label(var)}: validation RMSE {fmt_len(rmse(e[val]))}")
+            own.say(f"refit {mm.name}{variant_suffix(var)}: validation RMSE {fmt_len(rmse(e[val]))}")
             return rmse(e[val]), nm, mm, tth, e
 
         trial = [x for x in pmap(s, refit_on, [x for x in top if np.isfinite(x[0])]) if x is not None]
@@ -204,13 +204,6 @@ def _rung_variants(s: Setup, nm: str) -> list[dict]:
                 continue
         out.append(v)
     return out or [{}]
-
-
-def _variant_label(var: dict) -> str:
-    """`` (form kink)`` for ``{"asymmetry.form": "kink"}``; empty for an effect with one configuration."""
-    if not var:
-        return ""
-    return " (" + variant_label(var) + ")"
 
 
 #: How many of a rung's best refits are also tried with the new effect innermost (:func:`_other_order`).

@@ -23,7 +23,7 @@ from .parallel import pmap
 from .unexplained import Unexplained, explain_unexplained
 
 __all__ = ["Candidate", "Rung", "Setup", "screen_on", "screen_all", "refit_all", "rebase", "verdict",
-           "effect_variants", "own_config", "refit_from_final", "validate_alike", "variant_label"]
+           "effect_variants", "own_config", "refit_from_final", "validate_alike", "variant_label", "variant_suffix"]
 
 
 @dataclass
@@ -187,6 +187,11 @@ def screen_on(s: Setup, inner: Model, th_inner: np.ndarray, chosen: list, nm: st
     return r, vals, None
 
 
+def variant_suffix(var: dict) -> str:
+    """`` (form kink)`` for ``{"asymmetry.form": "kink"}``; empty for an effect with one configuration."""
+    return f" ({variant_label(var)})" if var else ""
+
+
 def variant_label(vv: dict) -> str:
     """``structure series, modes 2`` for ``{"dynamics.structure": "series", "dynamics.modes": 2.0}``."""
     return ", ".join(f"{k.split('.', 1)[-1]} {v:g}" if isinstance(v, float) else f"{k.split('.', 1)[-1]} {v}"
@@ -347,7 +352,7 @@ def _refit_each(s: Setup, cands: dict, carry: dict, full: dict) -> None:
         nm, vals, var = item
         if var is not None:
             own.cfg.update(var)
-        return _refit_one(own, nm, vals, f" ({variant_label(var)})" if var else "")
+        return _refit_one(own, nm, vals, variant_suffix(var or {}))
     for (nm, _, var), res in zip(items, pmap(s, one, items)):
         if res is not None and (nm not in full or _better_config(s, res, full[nm])):
             if nm in full:

@@ -312,14 +312,9 @@ class DynamicsEffect(Effect):
             for lag in ((0.0, 0.5, 1.0) if self._lagged else (0.0,)):
                 for fn in grid:
                     for z in zetas:
-                        d = series_filter(x, fn, z, dt, self.hold, lag) - x  # what the whole mode adds
-                        den = float(d @ d)
-                        if not (np.isfinite(den) and den > 0):
-                            continue
-                        part = float(np.clip((d @ ex) / den, 0.0, 1.0))  # least squares, within the bounds
-                        r = ex - part * d
-                        c = float(r @ r)
-                        if np.isfinite(c) and c < best[0]:
+                        # what the whole mode adds, its participation by least squares
+                        c, part = _participation(series_filter(x, fn, z, dt, self.hold, lag) - x, ex)
+                        if c < best[0]:
                             best = (c, {"fn": float(fn), "zeta": float(z), "part": part}
                                     | ({"lag": lag} if self._lagged else {}))
             if self.modes == 2 and best[1] is not None:
@@ -351,14 +346,9 @@ class DynamicsEffect(Effect):
         out = (np.inf, {**v, "fn2": float(grid[-1]), "zeta2": 0.7})
         for fn in grid:
             for z in zetas:
-                d = series_filter(x, v["fn"], v["zeta"], dt, self.hold, v.get("lag", 0.0), (fn, z)) - x
-                den = float(d @ d)
-                if not (np.isfinite(den) and den > 0):
-                    continue
-                part = float(np.clip((d @ ex) / den, 0.0, 1.0))
-                r = ex - part * d
-                c = float(r @ r)
-                if np.isfinite(c) and c < out[0]:
+                c, part = _participation(
+                    series_filter(x, v["fn"], v["zeta"], dt, self.hold, v.get("lag", 0.0), (fn, z)) - x, ex)
+                if c < out[0]:
                     out = (c, {**v, "part": part, "fn2": float(fn), "zeta2": float(z)})
         return out
 
@@ -409,6 +399,18 @@ class DynamicsEffect(Effect):
         return score, (f"the residual follows the input's acceleration: it explains {100 * gain:.0f} % of the "
                        f"residual variance beyond the input velocity (velocity alone {100 * r2v:.0f} %, "
                        f"corr {lag:+.2f}) → inertia/resonance of the stage{ring_txt}")
+
+
+def _participation(d: np.ndarray, ex: np.ndarray) -> tuple[float, float]:
+    """Least-squares participation in [0, 1] of what a mode adds (``d``) in the residual ``ex``, and the squared
+    error left: ``(inf, 0)`` when ``d`` is zero or not finite (the starts' scans skip it)."""
+    den = float(d @ d)
+    if not (np.isfinite(den) and den > 0):
+        return np.inf, 0.0
+    part = float(np.clip((d @ ex) / den, 0.0, 1.0))
+    r = ex - part * d
+    c = float(r @ r)
+    return (c if np.isfinite(c) else np.inf), part
 
 
 # ------------------------------------------------------------------------------------- choosing the structure
