@@ -21,7 +21,9 @@ import sys
 from pathlib import Path
 
 from hyst_control.compensation import Compensation, from_params
+from hyst_control.controller_settings import model_divergence
 from hyst_control.controllers import ALGORITHMS, CONTROLLERS, make_controller, make_supervised, mismatched
+from hyst_common.profiles import PEA_LIMITS
 from hyst_control.errors import ConfigError
 from hyst_control.reference import parse_reference
 from hyst_control.stability import Resonance, guard, identified_resonance
@@ -188,6 +190,10 @@ def run(args: argparse.Namespace) -> int:
         gains = stab.gains
         if stab.warn:
             print(f"hyst track: warning: {stab.message}", file=sys.stderr)
+    # a model that runs away within the stage's limits: refused where it runs open loop, said where it does not
+    diverging = model_divergence(args.algorithm, model, comp, PEA_LIMITS, 1.0 / args.rate)
+    if diverging:
+        print(f"hyst track: warning: {diverging}", file=sys.stderr)
     ctrl = make_supervised(args.algorithm, model, 1.0 / args.rate, gains=gains, initial=args.initial,
                            compensation=comp, act=args.stability != "warn")
     res = run_closed_loop(ctrl, ref, args.seconds, plant=plant)

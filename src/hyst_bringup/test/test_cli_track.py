@@ -103,3 +103,23 @@ def test_track_pid_runs_a_notch_at_the_resonance_unless_told_not_to(capsys):
     assert runs["--notch"]["derated"].get("notch_fn") == 350.0 and "notch_fn" not in runs["--no-notch"]["derated"]
     assert runs["--notch"]["derated"]["kp"] > 2 * runs["--no-notch"]["derated"]["kp"]
     assert runs["--notch"]["rmse"] < 0.5 * runs["--no-notch"]["rmse"]
+
+
+def test_a_model_that_runs_away_within_the_limits_is_refused_open_loop_and_reported_for_dppc(capsys, tmp_path):
+    """As the controller node decides (hyst_control.controller_settings.model_divergence): the open-loop inverse
+    would follow the runaway prediction (exit 2, one line); DPPC runs with the warning."""
+    from hyst_model.core import pea_default
+
+    m = pea_default().replace(alpha1=1.0)  # finite on a sine, not finite on steps across 0–150 V
+    body = "".join(f"      {k}: {v!r}\n" for k, v in m.to_dict().items())
+    p = tmp_path / "runaway.yaml"
+    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n" + body + "      dt: 0.0005\n")
+    assert main(["track", "--params", str(p), "--algorithm", "open_loop", "--seconds", "0.1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "diverges" in err[0] and "open-loop inverse" in err[0]
+    assert main(["track", "--params", str(p), "--algorithm", "dppc", "--seconds", "0.1", "--json"]) == 0
+    assert "diverges" in capsys.readouterr().err
+    ok = tmp_path / "ok.yaml"
+    ok.write_text(p.read_text().replace("alpha1: 1.0", f"alpha1: {pea_default().alpha1!r}"))
+    assert main(["track", "--params", str(ok), "--algorithm", "open_loop", "--seconds", "0.1", "--json"]) == 0
+    assert "diverges" not in capsys.readouterr().err

@@ -43,7 +43,8 @@ from .errors import ControlError
 from .controllers import ALGORITHMS, make_controller, make_supervised
 from .supervisor import Supervised
 from .reference import parse_reference
-from .controller_settings import GAINS, MODEL_KEYS, ControllerSettings, cached_guard, profile_model
+from .controller_settings import (GAINS, MODEL_KEYS, ControllerSettings, cached_guard, model_divergence,
+                                  profile_model)
 from .stability import POLICIES, StabilityVerdict, identified_resonance
 
 __all__ = ["ControllerNode", "ControllerSettings", "main"]
@@ -65,6 +66,8 @@ class ControllerNode(AtomicParametersNode):
         if self._compensating:
             self.get_logger().info("compensating the model's " + ", ".join(self._compensating))
         self._log_stability(None, self._settings.stability)
+        if self._settings.divergence:
+            self.get_logger().warning(self._settings.divergence)
         self.scheduling = set_realtime(int(self.get_parameter("rt_priority").value))
         if self.get_parameter("rt_priority").value and self.scheduling.policy != "fifo":
             self.get_logger().warning(f"{self.scheduling.note}; running with normal scheduling")
@@ -189,9 +192,11 @@ class ControllerNode(AtomicParametersNode):
         policy = str(get("stability.policy"))
         if policy not in POLICIES:
             raise ControlError(f"stability.policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+        comp = plan_compensation(model, effects, dict(evals), dict(evals), 1.0 / rate)
+        limits = CommandLimits(_F(get("v_min")), _F(get("v_max")), _F(get("slew_max")), _F(get("v_safe")))
+        divergence = model_divergence(alg, model, comp, limits, 1.0 / rate)  # ControlError: refused
         # checked as the compensation will run it (a mode it inverts is left only as a model error)
-        res = identified_resonance(effects, dict(evals), plan_compensation(model, effects, dict(evals), dict(evals),
-                                                                           1.0 / rate))
+        res = identified_resonance(effects, dict(evals), comp)
         notch = get("stability.notch")
         if not isinstance(notch, bool):
             raise ControlError(f"stability.notch must be true or false, got {notch!r}")
@@ -199,11 +204,11 @@ class ControllerNode(AtomicParametersNode):
                             (_F(get("v_min")), _F(get("v_max"))), notch)  # StabilityError (a ControlError) = rejected
         s = ControllerSettings(
             algorithm=alg, rate=_F(get("rate")),
-            limits=CommandLimits(_F(get("v_min")), _F(get("v_max")), _F(get("slew_max")), _F(get("v_safe"))),
+            limits=limits,
             watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
             dmrac_initial=init, model=model,
             reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, stability=stab,
-            effects=effects, effect_values=evals, gain_sets=tuple(gains.items()))
+            effects=effects, effect_values=evals, gain_sets=tuple(gains.items()), divergence=divergence)
         make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init, s.compensation())  # checks all
         return s
 
@@ -218,6 +223,8 @@ class ControllerNode(AtomicParametersNode):
         old, new = self._settings, self._read()
         self._settings = new
         self._log_stability(old.stability, new.stability)
+        if new.divergence and new.divergence != old.divergence:
+            self.get_logger().warning(new.divergence)
         if new.effects != old.effects or new.effect_values != old.effect_values:
             unused = self._unused_model_terms()
             if unused and unused != self._unused:
@@ -398,6 +405,9 @@ class ControllerNode(AtomicParametersNode):
         if self._oscillation:  # the oscillation watch derated the law (or, under policy warn, only saw it)
             st.level = max(st.level, DiagnosticStatus.WARN)
             st.message += f"; {self._oscillation}"
+        if self._settings.divergence:  # the feedback laws run it; the open-loop parts would not
+            st.level = max(st.level, DiagnosticStatus.WARN)
+            st.message += f"; {self._settings.divergence}"
         stab = self._settings.stability
         if stab is not None and stab.warn:  # derated (or running unstable gains under policy warn)
             st.level = max(st.level, DiagnosticStatus.WARN)

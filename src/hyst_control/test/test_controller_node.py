@@ -203,3 +203,39 @@ def test_a_pushed_model_with_effects_is_compensated_and_a_plain_push_clears_them
     r = node.set_parameters_atomically(controller_parameters(plain, plain.pack(pea_default().to_dict()), 5e-4))
     assert r.successful, r.reason
     assert node._compensating == [] and node._settings.effects == ()
+
+
+def test_a_model_that_diverges_within_the_command_limits_is_refused_where_it_runs_open_loop(harness, tmp_path):
+    """An MBW that runs away on commands within v_min..v_max and the slew limit (hyst_model.core.bounded): the
+    open-loop inverse and a delay's Smith predictor follow its prediction, so a push is rejected with the reason
+    (and a params file refused at start); DPPC inverts it one step from the measurement, so it runs, with the
+    divergence on /diagnostics as a WARN. The profile's own model passes the same probe."""
+    from hyst_model.core import pea_default
+    node, peer, ex, pub, got = harness("-p", "algorithm:=open_loop")
+    assert node._settings.divergence == ""
+    bad = pea_default().alpha1 * 0 + 1.0  # alpha1 = 1: finite on a sine, runs away on steps across the range
+    res = node.set_parameters([Parameter("model.alpha1", value=bad)])[0]
+    assert not res.successful and "diverges" in res.reason and "open-loop inverse" in res.reason
+    assert node.get_parameter("model.alpha1").value != bad
+    assert node.set_parameters([Parameter("algorithm", value="dppc")])[0].successful
+    assert node.set_parameters([Parameter("model.alpha1", value=bad)])[0].successful
+    assert "diverges" in node._settings.divergence and "dppc inverts it one step" in node._settings.divergence
+    # back to the open-loop inverse on this model: refused
+    res = node.set_parameters([Parameter("algorithm", value="open_loop")])[0]
+    assert not res.successful and "diverges" in res.reason
+    # with a delay (a Smith predictor on the base model) even DPPC refuses it
+    res = node.set_parameters_atomically([Parameter("model.effects", value=["delay"]),
+                                          Parameter("model.delay.tau", value=0.001)])
+    assert not res.successful and "delay predictor" in res.reason
+    assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
+    pub.publish(_state(0, 10e-6, 50.0))
+
+    def warned() -> bool:
+        return any(s.level >= DiagnosticStatus.WARN and "diverges" in s.message for d in got["diag"] for s in d.status)
+
+    assert _spin_until(ex, warned, 5.0)
+    p = tmp_path / "bad.yaml"
+    p.write_text(f"/**:\n  ros__parameters:\n    algorithm: open_loop\n    model:\n      base: mbw\n"
+                 f"      alpha1: {bad}\n")
+    with pytest.raises(Exception, match="diverges"):
+        harness("--params-file", str(p))

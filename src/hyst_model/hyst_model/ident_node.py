@@ -92,6 +92,7 @@ class IdentConfig:
 def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     """Fit ``cfg.model`` (+ effects) to one bag; returns ``(summary, model, result, dt)``. Pure: no ROS."""
     from .identify import fit
+    from .identify.admissible import check_admissible
     from .identify.input_range import identified_range
     from .io import read_state_bag, regularise
     from .models import data_config
@@ -103,9 +104,13 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     model = build_model(cfg.model, cfg.effects, config)
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed,
               split=cfg.val_fraction if cfg.val_fraction > 0 else None)
+    # Remark 4.1, parameters on their bounds and a divergence probe on the record's input range, as hyst fit
+    # reports them; the model is still written and pushed (the controller probes it against its own limits).
+    adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
     summary = {"bag": str(path), "model": cfg.model, "effects": list(cfg.effects), "method": cfg.method,
                "rmse": res.rmse, "rmse_train": res.rmse_train, "seconds": res.seconds, "samples": len(rec),
-               "params": res.params, "dt": rec.dt, "data_notes": notes, **identified_range(rec.u)}
+               "params": res.params, "dt": rec.dt, "data_notes": notes, **identified_range(rec.u),
+               "admissibility": adm.to_json()}
     return summary, model, res, rec.dt
 
 
@@ -290,6 +295,9 @@ class IdentNode(AtomicParametersNode):
         cfg = self._cfg
         self.get_logger().info(f"{summary['bag']}: validation RMSE {res.rmse * 1e9:.2f} nm "
                                f"(train {res.rmse_train * 1e9:.2f} nm, {res.seconds:.2f} s)")
+        adm = summary.get("admissibility") or {}
+        if adm.get("bounded") is False or adm.get("remark_4_1") is False:
+            self.get_logger().warning(f"{summary['bag']}: {adm.get('controllers', '')}")
         if cfg.params_file:
             from .io import spec_from_model, write_params
             target = os.path.abspath(cfg.params_file)

@@ -69,6 +69,8 @@ def test_fits_bag_writes_params_and_pushes_to_controller(tmp_path, ctx):
         assert _spin_until(ex, lambda: any(r.get("push") == "accepted" for r in node.results))
         fit = next(r for r in node.results if "rmse" in r)
         assert fit["rmse"] < 5e-9 and fit["params_file"] == str(out)
+        # checked as hyst fit checks it: probed within the record's input range, bounded (a runaway would be said)
+        assert fit["admissibility"]["bounded"] is True and fit["admissibility"]["divergence"] == ""
         spec = read_params(out)
         for k in KEYS:
             v = spec.values.get(k, spec.config.get(k))
