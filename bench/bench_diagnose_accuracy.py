@@ -62,7 +62,8 @@ def run_case(args: tuple) -> dict:
     out.update(named=named, ranked=ranked, missing=d.missing, base_over_noise=d.baseline_rmse / d.noise,
                base_train_over_noise=d.baseline_rmse_train / d.noise, caution=d.caution is not None,
                noise_floor=d.noise, fresh_base=e_base, fresh_final=e_final,
-               unexplained=d.unexplained.kind if d.unexplained else None)
+               unexplained=d.unexplained.kind if d.unexplained else None,
+               undetermined=[x.effect for x in d.undetermined])
     lib = [e for e in c.expected if e not in ("none", "unexplained", "pi_truth")]
     if lib:
         try:
@@ -75,6 +76,10 @@ def run_case(args: tuple) -> dict:
             out["fresh_true_error"] = str(err)
     out["seconds"] = time.perf_counter() - t0
     return out
+
+
+#: The library's effect names (a record's expected list may also hold none, unexplained, pi_truth).
+EFFECT_NAMES = ("asymmetry", "creep", "delay", "drift", "dynamics", "saturation")
 
 
 def _band(r: dict) -> str:
@@ -97,6 +102,7 @@ def summarise(res: list[dict]) -> str:
     lines.append("")
     stats = defaultdict(lambda: [0, 0])
     wrong_with, wrong_without, cautioned = 0, 0, 0
+    und_missed, und_flagged, und_none, und_wrong = 0, 0, 0, 0  # the "not determined by this record" note
     for r in res:
         b = _band(r)
         if b.startswith("single"):
@@ -113,6 +119,14 @@ def summarise(res: list[dict]) -> str:
                   else r["named"][0] == "none")
         stats[b][0] += ok
         stats[b][1] += 1
+        und = set(r.get("undetermined") or [])
+        lost = [e for e in r["expected"] if e in EFFECT_NAMES and e not in r["named"]]
+        if not ok and lost:
+            und_missed += 1
+            und_flagged += bool(und & set(lost))
+        if b == "none" and und:
+            und_none += 1
+        und_wrong += bool(und - set(r["expected"])) and b != "none"
         cautioned += bool(r.get("caution"))
         wrong_with += bool(r.get("caution")) and not ok
         wrong_without += not r.get("caution") and not ok
@@ -138,6 +152,9 @@ def summarise(res: list[dict]) -> str:
     if possible:
         lines.append(f"where adding the TRUE effect(s) cuts ≥3× on the fresh record, the diagnosed model cuts ≥3× "
                      f"in {sum(f >= 3 for f in possible)}/{len(possible)}")
+    lines.append(f"'not determined by this record' names a missed true effect in {und_flagged}/{und_missed} "
+                 f"wrong answers that missed one; it notes an effect on {und_none} records without one "
+                 f"(the record cannot exclude it), and an effect not in the truth on {und_wrong} others")
     lines.append(f"caution (the base does not carry over to the record's own hold-out) on {cautioned} cases, "
                  f"{wrong_with} of them answered wrong; {wrong_without} wrong answers without it")
     errs = [r for r in res if "error" in r]

@@ -47,6 +47,7 @@ from .prune import prune
 from .swap import swap
 from .ladder import climb
 from .stages import Candidate, Rung, Setup, refit_all, screen_all, verdict
+from .undetermined import sentence, undetermined
 from .unexplained import UNEXPLAINED_FACTOR, Unexplained
 
 __all__ = ["Candidate", "Rung", "Diagnosis", "diagnose", "refit", "guarded_refit", "default_fitter",
@@ -71,6 +72,7 @@ class Diagnosis:
     models: dict = field(default_factory=dict, repr=False)  # name → (Model, theta), for reports
     unexplained: Unexplained | None = None  # the error left ≥ UNEXPLAINED_FACTOR × noise, described
     caution: str | None = None  # the base does not carry over to the hold-out: the record may not determine it
+    undetermined: list = field(default_factory=list)  # effects the record cannot tell apart (.undetermined)
 
     def to_json(self) -> dict:
         return {
@@ -89,6 +91,7 @@ class Diagnosis:
             "samples": self.n_samples, "dt": self.dt, "seconds": self.seconds,
             "unexplained": self.unexplained.to_json() if self.unexplained else None,
             "caution": self.caution,
+            "undetermined": [x.to_json() for x in self.undetermined],
         }
 
 
@@ -201,8 +204,11 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     caution = base_caution(base, s.base_val, base_train, noise, u, unexplained_factor)
     if caution:
         expl = f"{expl}; {caution}"
+    und = undetermined(s, full, cands, list(chosen))                 # 5. what the record cannot tell apart
+    if und:
+        expl = f"{expl}; {sentence(und, noise)}"
     return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
-                     time.perf_counter() - t0, models, unexplained, caution)
+                     time.perf_counter() - t0, models, unexplained, caution, und)
 
 
 def _explain(c: Candidate, base: str, base_val: float) -> str:

@@ -1,0 +1,117 @@
+"""Effects the record cannot tell apart: from the base model, or from the effect named.
+
+A diagnosis answers from validation, so an effect the base model (refitted with it) takes on the record is not
+named — and the user reads "none". On a few sines a transport delay is a phase the MBW's memory terms also
+make, on slow triangles a warm-up drift is a slow change the loop's offset and creep follow: the effect fitted
+with the base changes the model's output by tens of times the sensor noise, yet the base refitted alone
+validates as well. The record does not determine it, and on another input (a fresh record of the same stage) the
+base alone may be far worse (generated GMA stages with a delay on sines: 4–14× the error the true delay leaves).
+Two effects can also validate alike against each other (a mode seen below its resonance and a delay).
+
+The diagnosis says so, with the numbers, and what to record to tell them apart. It changes no answer.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..effects.signals import fmt_len
+from .refit import paired_t, rmse
+from .stages import Setup, validate_alike
+
+__all__ = ["CONTRIBUTION", "Undetermined", "undetermined", "sentence"]
+
+#: An effect whose part of the fitted model's output (the model minus its base, same parameters) is at least this
+#: many times the noise floor RMS would be seen by a record that could tell; validating alike with the base, it is
+#: undetermined. On generated records without an effect the largest part any fitted effect took was 1.6× (32
+#: records of seed 27 and others read for this: 0–1.6×); a delay the base absorbed on sines took 31–39×.
+CONTRIBUTION = 3.0
+
+
+@dataclass
+class Undetermined:
+    """One effect the record does not determine (``hyst diagnose --json``: ``undetermined``)."""
+
+    effect: str
+    #: "the base" (the effect validates as the base alone does) or the effect named that it validates alike with.
+    against: str
+    rmse: float
+    #: RMS of the effect's part of its fitted model's output, in noise-floor units (None: not computed).
+    contribution: float | None
+    params: dict
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def _part(s: Setup, m, th: np.ndarray) -> float | None:
+    """RMS (noise-floor units) of what the effect adds to the output of its base+effect model ``(m, θ)``."""
+    names, bn = list(m.names), list(s.base_model.names)
+    if not all(n in names for n in bn):
+        return None  # an effect that replaces the base recursion: no base to compare with
+    th_b = np.array([th[names.index(n)] for n in bn])
+    with np.errstate(all="ignore"):
+        diff = m.simulate(th, s.t, s.u) - s.base_model.simulate(th_b, s.t, s.u)
+    return float(np.sqrt(np.mean(diff ** 2)) / s.noise) if np.all(np.isfinite(diff)) and s.noise > 0 else None
+
+
+def undetermined(s: Setup, full: dict, cands: dict, named: list) -> list[Undetermined]:
+    """The effects of the first rung (each refitted jointly with the base, ``full``) the record cannot tell apart.
+
+    With nothing named: each effect validating alike with the base (:func:`~.stages.validate_alike`) whose part
+    of its model's output is at least :data:`CONTRIBUTION` × the noise. With an effect named: each other
+    significant effect validating alike with the named one's own refit on the base.
+    """
+    out: list[Undetermined] = []
+    val = s.val
+    if not named:
+        for nm, (m, th, e) in full.items():
+            r = rmse(e[val])
+            if not validate_alike(s, s.base_val, r, paired_t(s.e_base[val], e[val])):
+                continue
+            part = _part(s, m, th)
+            if part is not None and part >= CONTRIBUTION:
+                out.append(Undetermined(nm, "the base", r, part, dict(cands[nm].params) if nm in cands else {}))
+        return sorted(out, key=lambda x: -(x.contribution or 0.0))
+    first = named[0]
+    if first not in full:
+        return out
+    e_n = full[first][2]
+    r_n = rmse(e_n[val])
+    for nm, (m, th, e) in full.items():
+        if nm in named or nm not in cands or not cands[nm].significant:
+            continue
+        r = rmse(e[val])
+        best, other, e_best, e_other = (r_n, r, e_n, e) if r_n <= r else (r, r_n, e, e_n)
+        if validate_alike(s, other, best, paired_t(e_other[val], e_best[val])):
+            out.append(Undetermined(nm, first, r, None, dict(cands[nm].params)))
+    return sorted(out, key=lambda x: x.rmse)
+
+
+def _values(params: dict, effect: str, at_most: int = 3) -> str:
+    items = [(k.split(".", 1)[1], v) for k, v in params.items() if k.startswith(effect + ".")]
+    shown = ", ".join(f"{k} {v:.3g}" for k, v in items[:at_most])
+    return shown + (", ..." if len(items) > at_most else "")
+
+
+def sentence(items: list[Undetermined], noise: float) -> str:
+    """The note in words ('' for none): what the record does not determine, and what to record to tell."""
+    if not items:
+        return ""
+    alone = [x for x in items if x.against == "the base"]
+    alike = [x for x in items if x.against != "the base"]
+    parts = []
+    if alone:
+        what = "; ".join(f"{x.effect} ({_values(x.params, x.effect)}: {x.contribution:.3g}× the noise)"
+                         for x in alone)
+        parts.append(f"but this record does not determine {what} (fitted values in SI units; the noise multiple "
+                     "is how much the effect changes the model's output): with it the refitted base validates as the "
+                     "base alone does — the base takes it on this input — so the record can neither show nor "
+                     "exclude it")
+    if alike:
+        what = "; ".join(f"{x.effect} ({_values(x.params, x.effect)}) validates at {fmt_len(x.rmse)} "
+                         f"({x.rmse / noise:.2f}× the noise floor)" for x in alike)
+        parts.append(f"this record does not tell {alike[0].against} from: {what}")
+    return ("; ".join(parts) + "; record steps with holds, band-limited noise or a sweep over the range "
+            "(hyst excite) to tell them apart")
