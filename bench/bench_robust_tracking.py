@@ -65,7 +65,8 @@ def identify(scenario, seed: int = 11, excitation=None):
 
 def track(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=None) -> float:
     """RMSE (m) of ``alg`` with the model and compensation of ``spec`` tracking ``ref`` (spec string or
-    Reference) on a fresh stage of ``scenario`` (name or ``seed -> plant``); NaN if the loop diverged."""
+    Reference) on a fresh stage of ``scenario`` (name or ``seed -> plant``); NaN if the loop diverged, or if the
+    node would refuse the model (it runs away within the command limits where the law runs it open loop)."""
     from hyst_control.compensation import from_params
     from hyst_control.errors import ControlError
     from hyst_bringup.loop import run_closed_loop
@@ -86,6 +87,13 @@ def track(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=N
         default = {"dppc": DPPCGains(), "dmrac": DMRACGains(), "pid": PIDGains()}[alg]
         v_range = (limits.v_min, limits.v_max) if limits is not None else (0.0, 150.0)
         gains = guard(alg, default, model, 1.0 / RATE, res, v_range=v_range).gains
+    # as the node decides: a model that runs away within the command limits is refused where it runs open loop
+    from hyst_common.profiles import PEA_LIMITS
+    from hyst_control.controller_settings import model_divergence
+    try:
+        model_divergence(alg, model, comp, limits if limits is not None else PEA_LIMITS, 1.0 / RATE)
+    except ControlError:
+        return float("nan")
     # as the node runs it: the command watched, the law derated if it rings on a mode the model does not know
     c = make_supervised(alg, model, 1.0 / RATE, limits=limits, gains=gains, compensation=comp)
     try:
