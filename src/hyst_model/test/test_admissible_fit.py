@@ -25,7 +25,8 @@ def test_every_reparameterised_point_is_admissible_and_admissible_points_map_to_
         th = am.inner(rng.uniform(lo, hi))
         v = m.unpack(th)
         assert v["alpha1"] < -abs(v["psi1"]) and v["alpha2"] < -abs(v["psi2"]), v
-    good = m.pack({**m.unpack(m.theta0), "psi1": 0.02, "alpha1": -0.05, "psi2": -0.01, "alpha2": -0.03})
+        assert v["psi1"] >= 0 and v["psi2"] >= 0, v  # ψ1 + ψ2·v never negative: no runaway at any input rate
+    good = m.pack({**m.unpack(m.theta0), "psi1": 0.02, "alpha1": -0.05, "psi2": 0.01, "alpha2": -0.03})
     np.testing.assert_allclose(am.inner(am.outer(good)), good, rtol=1e-12)
     bad = m.pack({**m.unpack(m.theta0), "psi1": 0.02, "alpha1": 0.01})
     fixed = m.unpack(am.inner(am.outer(bad)))
@@ -42,6 +43,9 @@ def test_real_piezo_admissible_fit_reports_both_figures(capsys):
     assert main(base + ["--admissible"]) == 0
     c = json.loads(capsys.readouterr().out)
     assert c["admissibility"]["remark_4_1"] is True and not c["admissibility"]["violations"]
+    # the free fit runs away on steps across its range (ψ2 = −1); the constrained one keeps ψ2 ≥ 0 and does not
+    assert free["admissibility"]["bounded"] is False and c["admissibility"]["bounded"] is True
+    assert c["params"]["psi2"] >= 0
     assert c["constrained"]["free_rmse"] == pytest.approx(free["rmse"], rel=1e-6)
     assert free["rmse"] <= c["rmse"] < 3 * free["rmse"]
     m = build_model("mbw", (), {"u_scale": 1.0, "y_scale": 1.0})

@@ -139,7 +139,11 @@ class AdmissibleModel(Model):
             top = max(-float(lo[ia]), MARGIN * 10)  # α ≥ its lower bound ⇒ m ≤ −lo − |ψ| ≤ −lo
             # |ψ| < −lo(α): otherwise no α within its bounds is below −|ψ| (α is clipped at lo(α) in inner())
             lim = top - MARGIN
-            ps[ip] = Param(q.name, float(np.clip(q.default, -lim, lim)), max(q.lower, -lim), min(q.upper, lim),
+            # ψ ≥ 0: with α < −|ψ| the loading branch grows y by (1 + |ψ + α|·|ν|) per sample and unloading shrinks
+            # it by (1 − (ψ − α)·|ν|); their product exceeds 1 when ψ1 + ψ2·v < 0, so a ψ2 < 0 turns into a
+            # runaway once the input moves faster than ψ1/|ψ2| per sample (the real piezo fit: ψ2 = −1 with
+            # ψ1 = 1e-5 — any step above 0.15 mV/sample). The thesis's own sets all have ψ ≥ 0.
+            ps[ip] = Param(q.name, float(np.clip(q.default, 0.0, lim)), max(q.lower, 0.0), min(q.upper, lim),
                            q.unit, q.doc)
             ps[ia] = Param(f"{p.name}_margin", max(MARGIN, -p.default - abs(ps[ip].default)), MARGIN, top, p.unit,
                            f"how far {p.name} stays below −|{ps[ip].name}| (Remark 4.1)")
