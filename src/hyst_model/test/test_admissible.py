@@ -54,6 +54,11 @@ def test_a_model_that_diverges_within_its_record_range_is_reported():
     assert bad.bounded is False and not bad.clean
     assert "steps between its ends" in bad.divergence and bad.controllers.startswith("unstable off its record")
     assert check_admissible(m, th_bad).bounded is None
+    assert "--admissible" not in bad.controllers  # ψ ≥ 0 here: the constrained fit would not be the cure
+    th_neg = th.copy()
+    th_neg[m.names.index("psi2")] = -1.0  # anti-damping rate term: runs away once the input moves fast
+    neg = check_admissible(m, th_neg, record=(t, u, y))
+    assert neg.bounded is False and "hyst fit --admissible keeps the rate terms passive" in neg.controllers
 
 
 def test_hyst_fit_reports_admissibility_in_json_and_text(tmp_path, capsys):

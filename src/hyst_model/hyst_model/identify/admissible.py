@@ -73,8 +73,11 @@ def check_admissible(model, theta, rel: float = 1e-6, record: tuple | None = Non
         dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
         adm.bounded, adm.divergence = probe_bounded(model, theta, u, y, dt)
         if not adm.bounded:
-            adm.controllers = (f"unstable off its record — {adm.divergence}; trust it (and a controller built on "
-                               f"it) only on inputs like the record's; {adm.controllers}")
+            vals = dict(zip(model.names, np.asarray(theta, dtype=np.float64)))
+            hint = ("; hyst fit --admissible keeps the rate terms passive (ψ ≥ 0) and avoids this"
+                    if any(vals.get(p, 0.0) < 0 for p in ("psi1", "psi2")) else "")
+            adm.controllers = (f"unstable off its record — {adm.divergence}{hint}; trust it (and a controller built "
+                               f"on it) only on inputs like the record's; {adm.controllers}")
     return adm
 
 
