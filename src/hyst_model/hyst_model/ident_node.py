@@ -68,6 +68,7 @@ class IdentConfig:
     controller_node: str = ""
     push_timeout: float = 5.0
     gaps: str = "auto"
+    admissible: bool = False
 
     def validate(self) -> "IdentConfig":
         from .models import BASE_MODELS
@@ -78,6 +79,8 @@ class IdentConfig:
             raise ValueError(f"gaps must be one of {', '.join(GAP_POLICIES)}")
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {', '.join(METHODS)}")
+        if self.admissible and self.model == "pi":
+            raise ValueError("admissible applies to mbw and bw (Remark 4.1 and their rate terms), not pi")
         if self.watch_dir and not Path(self.watch_dir).is_dir():
             raise ValueError(f"watch_dir {self.watch_dir!r} is not a directory")
         if self.params_file and not Path(self.params_file).parent.is_dir():
@@ -92,7 +95,7 @@ class IdentConfig:
 def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     """Fit ``cfg.model`` (+ effects) to one bag; returns ``(summary, model, result, dt)``. Pure: no ROS."""
     from .identify import fit
-    from .identify.admissible import check_admissible
+    from .identify.admissible import check_admissible, constrain
     from .identify.input_range import identified_range
     from .io import read_state_bag, regularise
     from .models import data_config
@@ -102,15 +105,18 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     rec.check()
     config = dict(data_config(rec.u, rec.y), dt=rec.dt)
     model = build_model(cfg.model, cfg.effects, config)
-    res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed,
-              split=cfg.val_fraction if cfg.val_fraction > 0 else None)
+    split = cfg.val_fraction if cfg.val_fraction > 0 else None
+    res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed, split=split)
+    constrained = None
+    if cfg.admissible:  # as hyst fit --admissible: Remark 4.1 and passive rate terms, at a stated cost
+        res, constrained = constrain(model, rec.t, rec.u, rec.y, res, split)
     # Remark 4.1, parameters on their bounds and a divergence probe on the record's input range, as hyst fit
     # reports them; the model is still written and pushed (the controller probes it against its own limits).
     adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
     summary = {"bag": str(path), "model": cfg.model, "effects": list(cfg.effects), "method": cfg.method,
                "rmse": res.rmse, "rmse_train": res.rmse_train, "seconds": res.seconds, "samples": len(rec),
                "params": res.params, "dt": rec.dt, "data_notes": notes, **identified_range(rec.u),
-               "admissibility": adm.to_json()}
+               "admissibility": adm.to_json(), "constrained": constrained}
     return summary, model, res, rec.dt
 
 
@@ -206,6 +212,9 @@ class IdentNode(AtomicParametersNode):
         d("gaps", "auto", ParameterDescriptor(
             description="irregular stamps in a bag: auto (collapse lockstep repeats, bridge up to 10 missed periods "
                         "with the input held, else keep the longest segment) | bridge | longest | refuse"))
+        d("admissible", False, ParameterDescriptor(
+            description="refit a model outside Remark 4.1 or with a negative rate term (psi < 0) constrained, as "
+                        "hyst fit --admissible: the fit the controllers can also run open loop"))
 
     def _read(self, changes: dict | None = None) -> IdentConfig:
         def get(name):
@@ -221,7 +230,7 @@ class IdentNode(AtomicParametersNode):
             effects=tuple(get("effects") or ()), method=str(get("method")), seed=int(get("seed")),
             val_fraction=float(get("val_fraction")), params_file=str(get("params_file")),
             overwrite=bool(get("overwrite")), controller_node=str(get("controller_node")),
-            push_timeout=float(get("push_timeout")), gaps=str(get("gaps")))
+            push_timeout=float(get("push_timeout")), gaps=str(get("gaps")), admissible=bool(get("admissible")))
 
     def _on_set(self, params) -> SetParametersResult:
         try:

@@ -187,21 +187,16 @@ def run(args) -> int:
     constrained = None
     if args.admissible and adm.remark_4_1 is None:
         raise HystError(f"--admissible: model {args.model} has no alpha/psi terms; Remark 4.1 does not apply")
-    if args.admissible and adm.remark_4_1 is False:
-        from ..identify.admissible import fit_admissible
-        free = res
-        theta_c, res = fit_admissible(model, rec.t, rec.u, rec.y, free.theta, split)
-        res.params, res.theta = model.unpack(theta_c), theta_c
-        e = rec.y - model.simulate(theta_c, rec.t, rec.u)
-        from ..identify.result import make_split
-        sp = make_split(rec.t, split)
-        res.rmse = float(np.sqrt(np.mean(e[sp.val_index()] ** 2))) if sp.has_validation else res.rmse
-        res.rmse_train = float(np.sqrt(np.mean(e[sp.train_index()] ** 2)))
-        constrained = {"free_rmse": free.rmse, "free_violations": adm.violations, "rmse": res.rmse}
-        adm = check_admissible(model, theta_c, record=(rec.t, rec.u, rec.y))
-        if not args.quiet:
-            print(f"hyst fit: Remark 4.1 enforced: validation RMSE {res.rmse * 1e9:.2f} nm "
-                  f"(free fit {free.rmse * 1e9:.2f} nm, which violated it)", file=sys.stderr)
+    if args.admissible:
+        from ..identify.admissible import constrain
+        free, free_violations = res, adm.violations
+        res, constrained = constrain(model, rec.t, rec.u, rec.y, free, split)
+        if constrained is not None:
+            constrained["free_violations"] = free_violations
+            adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
+            if not args.quiet:
+                print(f"hyst fit: Remark 4.1 and passive rate terms (ψ ≥ 0) enforced: validation RMSE "
+                      f"{res.rmse * 1e9:.2f} nm (free fit {free.rmse * 1e9:.2f} nm, outside them)", file=sys.stderr)
     if not adm.clean and not args.json:
         for line in adm.violations + [f"{b}" for b in adm.at_bounds] + ([adm.divergence] if adm.divergence else []):
             print(f"hyst fit: warning: {line}", file=sys.stderr)

@@ -15,8 +15,10 @@ import numpy as np
 
 from ..core.bounded import DIVERGENCE_SPANS, probe_range
 from ..model import Model
+from .result import FitResult
 
 __all__ = ["Admissibility", "check_admissible", "probe_bounded", "AdmissibleModel", "fit_admissible", "MARGIN",
+           "outside", "constrain",
            "DIVERGENCE_SPANS"]
 
 @dataclass
@@ -178,8 +180,33 @@ class AdmissibleModel(Model):
         return self.model.simulate(self.inner(theta_c), t, u)
 
 
+def outside(model, theta) -> bool:
+    """Whether θ leaves the set :class:`AdmissibleModel` fits in: Remark 4.1 violated, or a rate term ψ < 0."""
+    vals = dict(zip(model.names, np.asarray(theta, dtype=np.float64)))
+    return (any(a in vals and p in vals and not vals[a] < -abs(vals[p]) for a, p in (("alpha1", "psi1"),
+                                                                                      ("alpha2", "psi2")))
+            or any(vals.get(p, 0.0) < 0 for p in ("psi1", "psi2")))
+
+
+def constrain(model, t, u, y, free: FitResult, split) -> tuple[FitResult, dict | None]:
+    """``hyst fit --admissible`` (and the ident node's ``admissible``): the free fit ``free`` (a FitResult) if it
+    is already admissible, else the constrained refit (:func:`fit_admissible`) as a FitResult of ``model`` with
+    its validation and training RMSE on the same split, and what it cost (``{free_rmse, rmse}``)."""
+    if not outside(model, free.theta):
+        return free, None
+    from .result import make_split
+    theta_c, res = fit_admissible(model, t, u, y, free.theta, split)
+    res.params, res.theta = model.unpack(theta_c), theta_c
+    e = np.asarray(y, dtype=np.float64) - model.simulate(theta_c, t, u)
+    sp = make_split(t, split)
+    res.rmse = float(np.sqrt(np.mean(e[sp.val_index()] ** 2))) if sp.has_validation else res.rmse
+    res.rmse_train = float(np.sqrt(np.mean(e[sp.train_index()] ** 2)))
+    return res, {"free_rmse": free.rmse, "rmse": res.rmse}
+
+
 def fit_admissible(model, t, u, y, theta, split, max_nfev: int = 150):
-    """Refit ``model`` from ``theta`` (a free fit) with Remark 4.1 enforced; returns (θ of ``model``, result).
+    """Refit ``model`` from ``theta`` (a free fit) with Remark 4.1 and passive rate terms (ψ ≥ 0) enforced;
+    returns (θ of ``model``, result).
 
     The free optimum is projected onto the admissible set (each α pushed below −|ψ| by at least the margin)
     and the output-error least squares continues from there in the reparameterised model
