@@ -91,3 +91,19 @@ def test_a_command_swinging_on_purpose_with_a_smooth_output_is_not_an_oscillatio
 
     assert not flags(smooth)
     assert flags(ringing)
+
+
+def test_no_fallback_to_the_open_loop_inverse_on_a_model_that_runs_away_open_loop():
+    """At the last derating level the watch falls back to the open-loop inverse — unless the model runs away
+    within the command limits (hyst_control.controller_settings.model_divergence): then the law is kept and the
+    event says why. With the profile's model the fallback still happens."""
+    from hyst_control.supervisor import LEVELS
+
+    for model, falls in ((pea_default(), True), (pea_default().replace(alpha1=1.0), False)):
+        c = make_supervised("dppc", model, DT)
+        c.reset(15e-6, 75.0, 15e-6)
+        c.level = len(LEVELS["dppc"])  # every derating step used up
+        c._escalate(15e-6, 15e-6)
+        assert (c.algorithm == "open_loop") is falls, c.events
+        if not falls:
+            assert "no fallback" in c.events[-1] and "diverges" in c.events[-1]

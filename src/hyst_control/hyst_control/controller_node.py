@@ -256,6 +256,8 @@ class ControllerNode(AtomicParametersNode):
         adopts it, so the old law's oscillation record is cleared here once it is built."""
         def make(alg: str, gains):  # at rebuild time: the settings then in force (a model push since, ...)
             cur = self._settings
+            if alg != cur.algorithm:  # the open-loop fallback: refused (ControlError) for a runaway model
+                model_divergence(alg, cur.model, cur.compensation(), cur.limits, 1.0 / cur.rate)
             return make_controller(alg, cur.model, 1.0 / cur.rate, cur.limits, gains, cur.dmrac_initial,
                                    cur.compensation())
 

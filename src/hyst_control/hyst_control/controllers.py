@@ -108,6 +108,9 @@ def make_supervised(algorithm: str, model: MBWParams, dt: float, limits: Command
         gains = law.gains
 
     def same(alg: str, g):
+        if alg != algorithm:  # the fallback to the open-loop inverse: refused for a model that runs away open loop
+            from .controller_settings import model_divergence
+            model_divergence(alg, model, compensation, lim, dt)
         return make_controller(alg, model, dt, lim, g, initial, compensation)
 
     return Supervised(law, algorithm, gains, rebuild or same, dt, (lim.v_min, lim.v_max), act,

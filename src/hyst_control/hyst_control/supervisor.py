@@ -33,6 +33,7 @@ from collections.abc import Callable
 from typing import Any
 
 from .base import hand_over
+from .errors import ControlError
 from .stability import _DERATED, _candidate
 
 __all__ = ["OscillationMonitor", "Supervised", "LEVELS", "output_span"]
@@ -227,7 +228,12 @@ class Supervised:
             new = self._rebuild(self.algorithm, gains)
             msg = f"{where}; derated (level {self.level} of {len(steps)}: {changed})"
         elif self.algorithm != "open_loop":
-            new = self._rebuild("open_loop", None)
+            try:
+                new = self._rebuild("open_loop", None)
+            except ControlError as err:  # a model that runs away open loop is no fallback (controller_settings)
+                self.events.append(f"{where}; still oscillating at the last derating level, and the open-loop "
+                                   f"inverse is no fallback: {err}")
+                return
             self.algorithm = "open_loop"
             msg = f"{where}; still oscillating at the last derating level: fell back to the open-loop inverse"
         else:
