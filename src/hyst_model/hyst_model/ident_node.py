@@ -109,7 +109,9 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed, split=split)
     constrained = None
     if cfg.admissible:  # as hyst fit --admissible: Remark 4.1 and passive rate terms, at a stated cost
-        res, constrained = constrain(model, rec.t, rec.u, rec.y, res, split)
+        con = constrain(model, rec.t, rec.u, rec.y, res.theta, split)
+        if con is not None:
+            constrained, res = {"free_rmse": res.rmse, "rmse": con.rmse}, con
     # Remark 4.1, parameters on their bounds and a divergence probe on the record's input range, as hyst fit
     # reports them; the model is still written and pushed (the controller probes it against its own limits).
     adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))

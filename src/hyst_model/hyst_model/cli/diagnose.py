@@ -37,6 +37,10 @@ def register(subparsers) -> None:
                         "(repeatable; its other variants are then not tried)")
     p.add_argument("--report", metavar="DIR", help="write an HTML report with plots into DIR")
     p.add_argument("--out", metavar="P", help="write the best model of the error ladder as a params file")
+    p.add_argument("--admissible", action="store_true",
+                   help="refit the model named (what --out saves) with Remark 4.1 and passive rate terms (psi >= 0) "
+                        "when it lies outside them, as hyst fit --admissible: the model the controllers can also "
+                        "run open loop; both validation figures are reported")
     p.add_argument("--force", action="store_true", help="allow --report/--out to replace existing output")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--quiet", action="store_true", help="no progress display on stderr")
@@ -115,15 +119,32 @@ def run(args: argparse.Namespace) -> int:
     # The model diagnose hands on is checked as hyst fit checks its fit (one path): Remark 4.1 and parameters on
     # their bounds, in the text, the JSON and the params file's provenance.
     from ..identify.admissible import check_admissible
-    fm, fth = d.models[d.ladder[-1].model]
+    best = d.ladder[-1]
+    fm, fth = d.models[best.model]
     adm = check_admissible(fm, fth, record=(rec.t, rec.u, rec.y))
+    rmse_v, rmse_t, constrained = best.rmse, best.rmse_train, None
+    if args.admissible:
+        if adm.remark_4_1 is None:
+            raise HystError(f"--admissible: model {best.model} has no alpha/psi terms; Remark 4.1 does not apply")
+        from ..diagnose.refit import validation_mask
+        from ..effects.signals import fmt_len
+        from ..identify.admissible import constrain
+        con = constrain(fm, rec.t, rec.u, rec.y, fth, validation_mask(len(rec.t), rec.u))  # diagnose's own split
+        if con is not None:
+            constrained = {"free_rmse": best.rmse, "free_violations": adm.violations, "rmse": con.rmse}
+            fth, rmse_v, rmse_t = con.theta, con.rmse, con.rmse_train
+            d.models[best.model] = (fm, fth)
+            adm = check_admissible(fm, fth, record=(rec.t, rec.u, rec.y))
+            if not args.quiet:
+                print(f"hyst diagnose: {best.model} refitted with Remark 4.1 and passive rate terms (ψ ≥ 0): "
+                      f"validation RMSE {fmt_len(con.rmse)} (as diagnosed {fmt_len(best.rmse)}, outside them)",
+                      file=sys.stderr)
     out_path = None
     if args.out:
         from ..io import spec_from_model, write_params
-        best = d.ladder[-1]
-        model, theta = d.models[best.model]
+        model, theta = fm, fth
         from ..identify.input_range import identified_range
-        prov = {"method": "diagnose", "rmse": best.rmse, "rmse_train": best.rmse_train, "data": str(args.data),
+        prov = {"method": "diagnose", "rmse": rmse_v, "rmse_train": rmse_t, "data": str(args.data),
                 "controllers": adm.controllers, **identified_range(rec.u)}
         out_path = str(write_params(args.out, spec_from_model(model, theta, fit=prov, dt=rec.dt), force=args.force))
     report_path = None
@@ -148,6 +169,7 @@ def run(args: argparse.Namespace) -> int:
         obj["report"] = report_path
         obj["params_file"] = out_path
         obj["admissibility"] = _clean(adm.to_json())
+        obj["constrained"] = _clean(constrained)
         print(json.dumps(obj, allow_nan=False))
     else:
         print(_text(d, rec.source, adm))

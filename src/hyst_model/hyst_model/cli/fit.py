@@ -189,10 +189,10 @@ def run(args) -> int:
         raise HystError(f"--admissible: model {args.model} has no alpha/psi terms; Remark 4.1 does not apply")
     if args.admissible:
         from ..identify.admissible import constrain
-        free, free_violations = res, adm.violations
-        res, constrained = constrain(model, rec.t, rec.u, rec.y, free, split)
-        if constrained is not None:
-            constrained["free_violations"] = free_violations
+        con = constrain(model, rec.t, rec.u, rec.y, res.theta, split)
+        if con is not None:
+            free, res = res, con
+            constrained = {"free_rmse": free.rmse, "free_violations": adm.violations, "rmse": res.rmse}
             adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
             if not args.quiet:
                 print(f"hyst fit: Remark 4.1 and passive rate terms (ψ ≥ 0) enforced: validation RMSE "

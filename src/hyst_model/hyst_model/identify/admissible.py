@@ -188,20 +188,21 @@ def outside(model, theta) -> bool:
             or any(vals.get(p, 0.0) < 0 for p in ("psi1", "psi2")))
 
 
-def constrain(model, t, u, y, free: FitResult, split) -> tuple[FitResult, dict | None]:
-    """``hyst fit --admissible`` (and the ident node's ``admissible``): the free fit ``free`` (a FitResult) if it
-    is already admissible, else the constrained refit (:func:`fit_admissible`) as a FitResult of ``model`` with
-    its validation and training RMSE on the same split, and what it cost (``{free_rmse, rmse}``)."""
-    if not outside(model, free.theta):
-        return free, None
+def constrain(model, t, u, y, theta, split) -> FitResult | None:
+    """``hyst fit --admissible``, ``hyst diagnose --admissible`` and the ident node's ``admissible``: None when θ
+    (a free fit of ``model``) is already admissible, else the constrained refit (:func:`fit_admissible`) as a
+    FitResult of ``model`` (θ, params, validation and training RMSE on the same ``split``: a fraction, a split
+    name or a boolean validation mask)."""
+    if not outside(model, theta):
+        return None
     from .result import make_split
-    theta_c, res = fit_admissible(model, t, u, y, free.theta, split)
+    theta_c, res = fit_admissible(model, t, u, y, theta, split)
     res.params, res.theta = model.unpack(theta_c), theta_c
     e = np.asarray(y, dtype=np.float64) - model.simulate(theta_c, t, u)
     sp = make_split(t, split)
     res.rmse = float(np.sqrt(np.mean(e[sp.val_index()] ** 2))) if sp.has_validation else res.rmse
     res.rmse_train = float(np.sqrt(np.mean(e[sp.train_index()] ** 2)))
-    return res, {"free_rmse": free.rmse, "rmse": res.rmse}
+    return res
 
 
 def fit_admissible(model, t, u, y, theta, split, max_nfev: int = 150):
