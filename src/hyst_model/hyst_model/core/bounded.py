@@ -49,7 +49,8 @@ def probe_inputs(lo: float, hi: float, n: int = 8000, max_step: float = np.inf) 
 
 
 def probe_range(simulate: Callable[[np.ndarray], np.ndarray], lo: float, hi: float, span: float | None = None,
-                mid: float | None = None, n: int = 8000, max_step: float = np.inf) -> tuple[bool, str]:
+                mid: float | None = None, n: int = 8000, max_step: float = np.inf,
+                names: tuple[str, str] = ("the output range", "inputs within the range")) -> tuple[bool, str]:
     """Whether ``simulate(u)`` (from rest, SI in and out) stays bounded on the probes of :func:`probe_inputs`.
 
     Parameters
@@ -65,6 +66,8 @@ def probe_range(simulate: Callable[[np.ndarray], np.ndarray], lo: float, hi: flo
         Samples per probe (growth is judged between its first and last quarters).
     max_step : float
         Largest input change per sample (a controller's ``slew_max / rate``); inf: steps in one sample.
+    names : (str, str)
+        What the verdict calls the reference range and the inputs probed.
 
     Returns
     -------
@@ -87,12 +90,12 @@ def probe_range(simulate: Callable[[np.ndarray], np.ndarray], lo: float, hi: flo
     q = n // 4
     for what, yy in outs.items():
         if not np.all(np.isfinite(yy)):
-            return False, f"on {what} the model's output is not finite: it diverges on inputs within the range"
+            return False, f"on {what} the model's output is not finite: it diverges on {names[1]}"
         dev = np.abs(yy - mid) / span
         first, last = float(np.max(dev[:q])), float(np.max(dev[-q:]))
         if last > DIVERGENCE_SPANS and last > GROWTH * max(first, 1.0):
-            return False, (f"on {what} the model's output grows from {first:.3g}× to {last:.3g}× the output "
-                           "range: it diverges on inputs within the range")
+            return False, (f"on {what} the model's output grows from {first:.3g}× to {last:.3g}× {names[0]}: "
+                           f"it diverges on {names[1]}")
     return True, ""
 
 

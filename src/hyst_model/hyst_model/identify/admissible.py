@@ -52,10 +52,9 @@ def probe_bounded(model, theta, u: np.ndarray, y: np.ndarray, dt: float, n: int 
     """
     u, y = np.asarray(u, dtype=np.float64), np.asarray(y, dtype=np.float64)
     mid = 0.5 * (float(np.max(y)) + float(np.min(y)))
-    ok, what = probe_range(lambda uu: model.simulate(theta, np.arange(uu.size) * dt, uu), float(np.min(u)),
-                           float(np.max(u)), float(np.ptp(y)), mid, n)
-    return ok, what.replace("the output range", "the record's output range").replace(
-        "within the range", "the record spans")
+    return probe_range(lambda uu: model.simulate(theta, np.arange(uu.size) * dt, uu), float(np.min(u)),
+                       float(np.max(u)), float(np.ptp(y)), mid, n,
+                       names=("the record's output range", "inputs the record spans"))
 
 
 def check_admissible(model, theta, rel: float = 1e-6, record: tuple | None = None) -> Admissibility:
@@ -77,7 +76,7 @@ def check_admissible(model, theta, rel: float = 1e-6, record: tuple | None = Non
         if not adm.bounded:
             vals = dict(zip(model.names, np.asarray(theta, dtype=np.float64)))
             hint = ("; hyst fit --admissible keeps the rate terms passive (ψ ≥ 0) and avoids this"
-                    if any(vals.get(p, 0.0) < 0 for p in ("psi1", "psi2")) else "")
+                    if _active_rate(vals) else "")
             adm.controllers = (f"unstable off its record — {adm.divergence}{hint}; trust it (and a controller built "
                                f"on it) only on inputs like the record's; {adm.controllers}")
     return adm
@@ -185,7 +184,12 @@ def outside(model, theta) -> bool:
     vals = dict(zip(model.names, np.asarray(theta, dtype=np.float64)))
     return (any(a in vals and p in vals and not vals[a] < -abs(vals[p]) for a, p in (("alpha1", "psi1"),
                                                                                       ("alpha2", "psi2")))
-            or any(vals.get(p, 0.0) < 0 for p in ("psi1", "psi2")))
+            or _active_rate(vals))
+
+
+def _active_rate(vals: dict) -> bool:
+    """A rate term ψ < 0: anti-damping that grows with the input's speed (see :class:`AdmissibleModel`)."""
+    return any(vals.get(p, 0.0) < 0 for p in ("psi1", "psi2"))
 
 
 def constrain(model, t, u, y, theta, split) -> FitResult | None:
