@@ -71,3 +71,4 @@ def test_diagnose_admissible_saves_the_model_hyst_fit_admissible_gives(capsys, t
     assert d["admissibility"]["bounded"] is True and d["admissibility"]["remark_4_1"] is True
     spec = read_params(out)
     assert spec.fit["rmse"] == pytest.approx(d["constrained"]["rmse"]) and spec.values["psi2"] >= 0
+    assert spec.fit["admissible"].startswith("Remark 4.1 and passive rate terms")  # as hyst fit --admissible

@@ -146,6 +146,9 @@ def run(args: argparse.Namespace) -> int:
         from ..identify.input_range import identified_range
         prov = {"method": "diagnose", "rmse": rmse_v, "rmse_train": rmse_t, "data": str(args.data),
                 "controllers": adm.controllers, **identified_range(rec.u)}
+        if constrained:
+            from ..identify.admissible import provenance
+            prov["admissible"] = provenance(constrained["free_rmse"])
         out_path = str(write_params(args.out, spec_from_model(model, theta, fit=prov, dt=rec.dt), force=args.force))
     report_path = None
     if args.report:

@@ -211,7 +211,8 @@ def run(args) -> int:
         from ..identify.input_range import identified_range
         prov.update(identified_range(rec.u))
         if constrained:
-            prov["admissible"] = f"Remark 4.1 enforced; the free fit validated at {constrained['free_rmse']:.4g} m"
+            from ..identify.admissible import provenance
+            prov["admissible"] = provenance(free.rmse)
         write_params(out, spec_from_model(model, res.theta, fit=prov, dt=rec.dt), force=args.force)
     if args.json:
         obj = {"model": args.model, "effects": effects, "method": args.method, "rmse": res.rmse,

@@ -18,7 +18,7 @@ from ..model import Model
 from .result import FitResult
 
 __all__ = ["Admissibility", "check_admissible", "probe_bounded", "AdmissibleModel", "fit_admissible", "MARGIN",
-           "outside", "constrain",
+           "outside", "constrain", "provenance",
            "DIVERGENCE_SPANS"]
 
 @dataclass
@@ -207,6 +207,11 @@ def constrain(model, t, u, y, theta, split) -> FitResult | None:
     res.rmse = float(np.sqrt(np.mean(e[sp.val_index()] ** 2))) if sp.has_validation else res.rmse
     res.rmse_train = float(np.sqrt(np.mean(e[sp.train_index()] ** 2)))
     return res
+
+
+def provenance(free_rmse: float) -> str:
+    """The params file's ``fit.admissible`` line for a constrained fit (hyst fit and hyst diagnose alike)."""
+    return f"Remark 4.1 and passive rate terms (psi >= 0) enforced; the free fit validated at {free_rmse:.4g} m"
 
 
 def fit_admissible(model, t, u, y, theta, split, max_nfev: int = 150):
