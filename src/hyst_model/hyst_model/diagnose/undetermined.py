@@ -13,9 +13,11 @@ The diagnosis says so, with the numbers, and what to record to tell them apart. 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import cast
 
 import numpy as np
 
+from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from .refit import paired_t, rmse
 from .stages import Setup, validate_alike
@@ -47,10 +49,9 @@ class Undetermined:
 
 def _part(s: Setup, m, th: np.ndarray) -> float | None:
     """RMS (noise-floor units) of what the effect adds to the output of its base+effect model ``(m, θ)``."""
-    names, bn = list(m.names), list(s.base_model.names)
-    if not all(n in names for n in bn):
-        return None  # an effect that replaces the base recursion: no base to compare with
-    th_b = np.array([th[names.index(n)] for n in bn])
+    if any(getattr(ef, "kind", "") == "base" for ef in getattr(m, "effects", ())):
+        return None  # an effect that replaces the base recursion: no base to compare with (as rebase skips it)
+    th_b = cast(ComposedModel, m).split(th)[0]
     with np.errstate(all="ignore"):
         diff = m.simulate(th, s.t, s.u) - s.base_model.simulate(th_b, s.t, s.u)
     return float(np.sqrt(np.mean(diff ** 2)) / s.noise) if np.all(np.isfinite(diff)) and s.noise > 0 else None
