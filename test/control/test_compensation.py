@@ -126,6 +126,7 @@ def test_declared_configuration_defaults_mean_what_a_file_without_the_key_means(
         for k, v in cls(base).config().items():
             assert declared[f"{name}.{k}"][0] == v, (name, k)
     assert declared["asymmetry.form"][0] == "quadratic"
+    assert declared["creep.form"][0] == "log" and "creep.tau1" in declared  # both forms' parameters declared
 
 
 def test_saturation_respected_as_a_limit():
@@ -216,6 +217,11 @@ _EXACT_CASES = {
     # a mode outside a bent loop: its predictor and its inverse's state run on the bent prediction
     "asymmetry+dynamics": {"asymmetry.a_y": -0.003, "asymmetry.u_c": 75.0, "asymmetry.y_c": 15e-6,
                            "dynamics.fn": 350.0, "dynamics.zeta": 0.05},
+    # creep as two lags with free time constants (creep.form: lags), alone and outside a delay
+    "creep-lags": {"creep.form": "lags", "creep.gain": 0.05, "creep.tau1": 0.05, "creep.tau2": 0.8,
+                   "creep.share": 0.6},
+    "delay+creep-lags": {"delay.tau": 0.0015, "delay.side": "input", "creep.form": "lags", "creep.gain": 0.05,
+                         "creep.tau1": 0.05, "creep.tau2": 0.8, "creep.share": 0.6},
     "creep+asymmetry": {"creep.gain": 0.03, "creep.tilt": 0.1,
                         "asymmetry.a_y": -0.003, "asymmetry.u_c": 75.0, "asymmetry.y_c": 15e-6},
 }
@@ -307,3 +313,27 @@ def test_a_disturbance_the_model_does_not_know_is_rejected_through_the_compensat
     e = (r.y - r.r)[r.t > 0.25]  # after the loop has met the offset
     # a 200 nm/s ramp is followed with the observer's lag (0.05 s: 10 nm), not left standing at most of its size
     assert np.sqrt(np.mean(e ** 2)) < 0.1 * d_end, (np.sqrt(np.mean(e ** 2)), d_end)
+
+
+def test_a_params_file_with_creep_as_two_lags_is_compensated_with_its_own_lags(tmp_path):
+    """The file diagnose writes for the lags form (creep.form, tau1, tau2, share, tau_max) reaches the controllers
+    as that operator: the compensation inverts two lags with the file's time constants, not the log law."""
+    import numpy as np
+
+    from hyst_control.compensation import from_params
+    from hyst_model.effects import compose
+    from hyst_model.io import read_params, spec_from_model, write_params
+    from hyst_model.model import MBWModel
+
+    m = compose(MBWModel(u_scale=15.0, y_scale=5.42e-6), ["creep"],
+                {"dt": DT, "creep.form": "lags", "creep.tau_max": 4.0})
+    th = m.theta0.copy()
+    th[:8] = pea_default().vector
+    for k, v in {"creep.gain": 0.06, "creep.tau1": 0.05, "creep.tau2": 1.5, "creep.share": 0.3}.items():
+        th[m.names.index(k)] = v
+    spec = read_params(write_params(tmp_path / "p.yaml", spec_from_model(m, th, dt=DT)))
+    _, comp = from_params(spec, DT)
+    assert comp.names == ["creep"]
+    inv = comp.used[0]
+    np.testing.assert_allclose(inv._a, np.exp(-DT / np.array([0.05, 1.5])))
+    np.testing.assert_allclose(inv._wa / inv._a, [0.3, 0.7])

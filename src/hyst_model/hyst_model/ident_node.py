@@ -23,6 +23,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
@@ -69,6 +70,7 @@ class IdentConfig:
     push_timeout: float = 5.0
     gaps: str = "auto"
     admissible: bool = False
+    effect_config: tuple[str, ...] = ()
 
     def validate(self) -> "IdentConfig":
         from .models import BASE_MODELS
@@ -81,6 +83,7 @@ class IdentConfig:
             raise ValueError(f"method must be one of {', '.join(METHODS)}")
         if self.admissible and self.model == "pi":
             raise ValueError("admissible applies to mbw and bw (Remark 4.1 and their rate terms), not pi")
+        self.user_config()  # the effects and their configuration, checked before any bag is fitted
         if self.watch_dir and not Path(self.watch_dir).is_dir():
             raise ValueError(f"watch_dir {self.watch_dir!r} is not a directory")
         if self.params_file and not Path(self.params_file).parent.is_dir():
@@ -90,6 +93,19 @@ class IdentConfig:
         if self.controller_node and not self.controller_node.startswith("/"):
             raise ValueError("controller_node must be a fully qualified node name such as /hyst_controller")
         return self
+
+
+    def user_config(self) -> dict:
+        """``effect_config`` as a configuration, checked: each item ``EFFECT.KEY=VALUE`` for a listed effect, and
+        the model with it buildable (an unknown effect or form is refused with the effect's own reason)."""
+        from .errors import HystError
+        from .spec import build_model, parse_effect_config
+        try:
+            user = parse_effect_config(self.effect_config, self.effects)
+            build_model(self.model, self.effects, {"dt": 1e-3, "u_scale": 1.0, "y_scale": 1.0, **user})
+        except HystError as err:
+            raise ValueError(str(err)) from err
+        return user
 
 
 def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
@@ -103,9 +119,16 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     # Lockstep bags repeat sample 0, realtime bags miss periods: made regular as `hyst fit --gaps` does.
     rec, notes = regularise(read_state_bag(path, cfg.topic), cfg.gaps)
     rec.check()
-    config = dict(data_config(rec.u, rec.y), dt=rec.dt)
-    model = build_model(cfg.model, cfg.effects, config)
     split = cfg.val_fraction if cfg.val_fraction > 0 else None
+    config = dict(data_config(rec.u, rec.y), dt=rec.dt)
+    if cfg.effects:  # each effect's settings from the samples the fit scores, then the user's: as hyst fit does
+        from .effects import effects_data_config
+        from .identify.result import make_split
+        scored = np.zeros(len(rec), dtype=bool)
+        scored[make_split(rec.t, split).train_index()] = True
+        config.update(effects_data_config(cfg.effects, rec.t, rec.u, rec.y, scored))
+    config.update(cfg.user_config())
+    model = build_model(cfg.model, cfg.effects, config)
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed, split=split)
     constrained = None
     if cfg.admissible:  # as hyst fit --admissible: Remark 4.1 and passive rate terms, at a stated cost
@@ -214,6 +237,9 @@ class IdentNode(AtomicParametersNode):
         d("gaps", "auto", ParameterDescriptor(
             description="irregular stamps in a bag: auto (collapse lockstep repeats, bridge up to 10 missed periods "
                         "with the input held, else keep the longest segment) | bridge | longest | refuse"))
+        d("effect_config", S, ParameterDescriptor(
+            description="effect configuration, EFFECT.KEY=VALUE items as hyst fit --config takes them, e.g. "
+                        "creep.form=lags or dynamics.structure=feedback (hyst diagnose writes the ones it chose)"))
         d("admissible", False, ParameterDescriptor(
             description="refit a model outside Remark 4.1 or with a negative rate term (psi < 0) constrained, as "
                         "hyst fit --admissible: the fit the controllers can also run open loop"))
@@ -232,7 +258,8 @@ class IdentNode(AtomicParametersNode):
             effects=tuple(get("effects") or ()), method=str(get("method")), seed=int(get("seed")),
             val_fraction=float(get("val_fraction")), params_file=str(get("params_file")),
             overwrite=bool(get("overwrite")), controller_node=str(get("controller_node")),
-            push_timeout=float(get("push_timeout")), gaps=str(get("gaps")), admissible=bool(get("admissible")))
+            push_timeout=float(get("push_timeout")), gaps=str(get("gaps")), admissible=bool(get("admissible")),
+            effect_config=tuple(get("effect_config") or ()))
 
     def _on_set(self, params) -> SetParametersResult:
         try:

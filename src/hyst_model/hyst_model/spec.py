@@ -8,10 +8,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from .errors import EffectError, ParamsError
+from .errors import DataError, EffectError, ParamsError
 from .model import Model
 
-__all__ = ["build_model"]
+__all__ = ["build_model", "parse_effect_config"]
 
 
 def build_model(base: str, effects: Sequence[str] = (), config: Mapping[str, object] | None = None) -> Model:
@@ -56,3 +56,30 @@ def build_model(base: str, effects: Sequence[str] = (), config: Mapping[str, obj
         return compose(model, list(effects), config)
     except KeyError as err:
         raise EffectError(f"unknown effect {err.args[0]!r}") from None
+
+
+def parse_effect_config(items: Sequence[str], effects: Sequence[str]) -> dict:
+    """``["dynamics.structure=feedback"]`` → ``{"dynamics.structure": "feedback"}`` (numbers as floats).
+
+    Keys must belong to one of the listed effects (``<effect>.<key>``); the effect itself checks the value.
+    ``hyst fit --config`` and the identification node's ``effect_config`` read their items here.
+
+    Raises
+    ------
+    DataError
+        An item that is not ``EFFECT.KEY=VALUE`` or names an effect not listed.
+    """
+    out: dict = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        name = key.split(".", 1)[0]
+        if not sep or "." not in key or not value:
+            raise DataError(f"--config needs EFFECT.KEY=VALUE, e.g. dynamics.structure=feedback, got {item!r}")
+        if name not in effects:
+            raise DataError(f"--config {key}: effect {name!r} is not in --effects ({', '.join(effects) or 'none'})")
+        try:
+            out[key] = float(value)
+        except ValueError:
+            out[key] = value
+    return out

@@ -14,7 +14,8 @@ CFG = {"u_scale": 15.0, "y_scale": 5.42e-6, "dt": 1e-3}
 VALUES = {"delay.tau": 1.3e-3, "creep.gain": 0.02, "creep.tilt": 0.1, "asymmetry.a_u": 0.05,
           "asymmetry.a_y": 0.02, "asymmetry.slope": 0.05, "asymmetry.level": 1e-5, "saturation.width": 2e-6,
           "saturation.top": 1.2e-5, "drift.c1": 3e-9, "drift.c3": -2e-9, "dynamics.fn": 300.0,
-          "dynamics.zeta": 0.05, "dynamics.part": 0.3, "dynamics.lag": 0.4}
+          "dynamics.zeta": 0.05, "dynamics.part": 0.3, "dynamics.lag": 0.4, "creep.tau1": 0.05,
+          "creep.tau2": 1.2, "creep.share": 0.6}
 
 
 def _record(n=4000):
@@ -40,7 +41,8 @@ STACKS = [(["delay", "creep", "asymmetry", "saturation", "drift"], {}),
           (["dynamics"], {"dynamics.hold": "foh"}),
           (["creep", "delay"], {"delay.side": "output"}),
           (["asymmetry"], {"asymmetry.form": "kink"}),
-          (["saturation", "creep"], {"saturation.two_sided": 1.0})]
+          (["saturation", "creep"], {"saturation.two_sided": 1.0}),
+          (["delay", "creep"], {"creep.form": "lags"})]
 
 
 @pytest.mark.parametrize("names,extra", STACKS, ids=["+".join(s[0]) for s in STACKS])
@@ -101,11 +103,12 @@ def test_structures_the_chain_rule_does_not_cover_fall_back_to_differences():
     assert TrainProblem(m, t, u, np.zeros_like(t), Split(0, t.size, t.size, t.size, "all")).has_jac
 
 
-def test_creeps_own_push_is_its_operator_on_each_column():
-    c = EFFECTS["creep"]({"dt": 1e-3})
+@pytest.mark.parametrize("form,th", [("log", [0.03, -0.2]), ("lags", [0.05, 0.04, 0.9, 0.7])])
+def test_creeps_own_push_is_its_operator_on_each_column(form, th):
+    c = EFFECTS["creep"]({"dt": 1e-3, "creep.form": form})
     t = np.arange(6000) * 1e-3
     J = np.random.default_rng(3).normal(size=(t.size, 5)).cumsum(axis=0)
-    th = np.array([0.03, -0.2])
+    th = np.array(th)
     pushed = c.push(th, t, None, np.sin(t), None, J)
     each = np.column_stack([c.output(th, t, None, np.ascontiguousarray(J[:, k])) for k in range(J.shape[1])])
     np.testing.assert_allclose(pushed, each, rtol=0, atol=1e-12 * np.max(np.abs(each)))

@@ -202,3 +202,33 @@ def test_admissible_refits_a_fit_outside_remark_4_1_or_with_a_negative_rate_term
     assert c is None or c["rmse"] < 1.05 * c["free_rmse"]
     with pytest.raises(ValueError, match="admissible"):
         IdentConfig(admissible=True, model="pi").validate()
+
+
+def test_effect_configuration_and_the_records_own_settings_reach_the_fit(tmp_path):
+    """effect_config is hyst fit --config in the node, and each effect's settings come from the bag as hyst fit
+    takes them (before, the node fitted every effect in its default configuration with no data settings): creep
+    as two lags with free time constants, bounded by a third of the fitted span, found on a stage whose creep
+    settles in seconds; a bad item is refused at set time with the reason."""
+    from scipy.signal import lfilter
+
+    from hyst_model.ident_node import IdentConfig, fit_bag
+    rng = np.random.default_rng(5)
+    dt = 1e-3
+    t = np.arange(12000) * dt
+    u = np.repeat(rng.uniform(10.0, 140.0, 12), 1000)
+    x = TRUE.simulate(u)
+    y = x.copy()
+    for tau, w in ((0.1, 0.5), (1.5, 0.5)):
+        a = np.exp(-dt / tau)
+        y += 0.1 * w * lfilter([1 - a], [1, -a], x - x[0])
+    bag = write_state_bag(tmp_path / "creep", t, u, y + rng.normal(0, 2e-9, t.size))
+    plain, _, res_p, _ = fit_bag(str(bag), IdentConfig(effects=("creep",)))
+    lags, model, res_l, _ = fit_bag(str(bag), IdentConfig(effects=("creep",), effect_config=("creep.form=lags",)))
+    creep = model.effects[0]
+    assert creep.form == "lags" and creep.tau_max == pytest.approx(0.75 * t[-1] / 3.0, rel=1e-3)
+    assert sorted((lags["params"]["creep.tau1"], lags["params"]["creep.tau2"])) == [
+        pytest.approx(0.1, rel=0.3), pytest.approx(1.5, rel=0.3)], lags["params"]
+    assert res_l.rmse < 0.5 * res_p.rmse, (res_l.rmse, res_p.rmse)
+    for bad, why in ((("creep.form=powerlaw",), "creep.form"), (("dynamics.structure=series",), "dynamics")):
+        with pytest.raises(ValueError, match=why):
+            IdentConfig(effects=("creep",), effect_config=bad).validate()

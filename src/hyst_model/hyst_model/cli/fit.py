@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import DataError, EffectError, HystError, ParamsError
+from ..spec import parse_effect_config as parse_config
 from ..identify.methods import METHODS
 
 if TYPE_CHECKING:
@@ -40,27 +41,6 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
                    help="read an MCAP bag whose recorder was killed (no footer) up to its damaged end")
     p.add_argument("--resample", type=float, metavar="HZ",
                    help="resample to this rate before fitting (MBW's δ and rate terms are per sample)")
-
-
-def parse_config(items: list[str], effects: list[str]) -> dict:
-    """``["dynamics.structure=feedback"]`` → ``{"dynamics.structure": "feedback"}`` (numbers as floats).
-
-    Keys must belong to one of the listed effects (``<effect>.<key>``); the effect itself checks the value.
-    """
-    out: dict = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        key, value = key.strip(), value.strip()
-        name = key.split(".", 1)[0]
-        if not sep or "." not in key or not value:
-            raise DataError(f"--config needs EFFECT.KEY=VALUE, e.g. dynamics.structure=feedback, got {item!r}")
-        if name not in effects:
-            raise DataError(f"--config {key}: effect {name!r} is not in --effects ({', '.join(effects) or 'none'})")
-        try:
-            out[key] = float(value)
-        except ValueError:
-            out[key] = value
-    return out
 
 
 def parse_split(train: str | None, val_fraction: float, how: str = "tail"):
