@@ -23,7 +23,6 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
@@ -94,7 +93,6 @@ class IdentConfig:
             raise ValueError("controller_node must be a fully qualified node name such as /hyst_controller")
         return self
 
-
     def user_config(self) -> dict:
         """``effect_config`` as a configuration, checked: each item ``EFFECT.KEY=VALUE`` for a listed effect, and
         the model with it buildable (an unknown effect or form is refused with the effect's own reason)."""
@@ -122,12 +120,9 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     split = cfg.val_fraction if cfg.val_fraction > 0 else None
     config = dict(data_config(rec.u, rec.y), dt=rec.dt)
     if cfg.effects:  # each effect's settings from the samples the fit scores, then the user's: as hyst fit does
-        from .effects import effects_data_config
-        from .identify.result import make_split
-        scored = np.zeros(len(rec), dtype=bool)
-        scored[make_split(rec.t, split).train_index()] = True
-        config.update(effects_data_config(cfg.effects, rec.t, rec.u, rec.y, scored))
-    config.update(cfg.user_config())
+        from .spec import effect_settings, parse_effect_config
+        config.update(effect_settings(cfg.effects, rec.t, rec.u, rec.y, split))
+        config.update(parse_effect_config(cfg.effect_config, cfg.effects))  # checked when it was set
     model = build_model(cfg.model, cfg.effects, config)
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed, split=split)
     constrained = None

@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 from .errors import DataError, EffectError, ParamsError
 from .model import Model
 
-__all__ = ["build_model", "parse_effect_config"]
+__all__ = ["build_model", "parse_effect_config", "effect_settings"]
 
 
 def build_model(base: str, effects: Sequence[str] = (), config: Mapping[str, object] | None = None) -> Model:
@@ -83,3 +83,16 @@ def parse_effect_config(items: Sequence[str], effects: Sequence[str]) -> dict:
         except ValueError:
             out[key] = value
     return out
+
+
+def effect_settings(effects: Sequence[str], t, u, y, split) -> dict:
+    """Each effect's configuration from the samples a fit with ``split`` scores (:meth:`Effect.data_config`: the
+    drift knots' span, the asymmetry's centres, creep's longest lag); ``hyst fit`` and the identification node
+    merge it before the user's ``--config`` / ``effect_config``."""
+    import numpy as np
+
+    from .effects import effects_data_config
+    from .identify.result import make_split
+    scored = np.zeros(np.asarray(t).size, dtype=bool)
+    scored[make_split(t, split).train_index()] = True
+    return effects_data_config(list(effects), t, u, y, scored)

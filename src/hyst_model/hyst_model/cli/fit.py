@@ -145,11 +145,8 @@ def run(args) -> int:
     config["dt"] = rec.dt
     if args.model in ("mbw", "bw"):
         # each effect's own settings from the scored samples, as hyst diagnose does (e.g. the drift knots' span)
-        from ..effects import effects_data_config
-        from ..identify.result import make_split
-        scored = np.zeros(len(rec), dtype=bool)
-        scored[make_split(rec.t, split).train_index()] = True
-        config.update(effects_data_config(effects, rec.t, rec.u, rec.y, scored))
+        from ..spec import effect_settings
+        config.update(effect_settings(effects, rec.t, rec.u, rec.y, split))
     config.update(user_cfg)
     try:
         model = build_model(args.model, effects, config)

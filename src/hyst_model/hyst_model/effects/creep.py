@@ -246,13 +246,13 @@ def _lags_start(t: np.ndarray, x: np.ndarray, residual: np.ndarray, tau_max: flo
     from the one lag its residual showed ended with that lag's share at 1 and the other on its bound, 6.9× the
     noise; from two distinct lags, each with half the creep, it reached the noise).
     """
-    D = (x[None, :] - creep_lags(t, x)).T  # (n, m): what each lag falls short of the displacement
+    m = int(np.searchsorted(TAUS, tau_max * (1 + 1e-9), side="right"))  # the lags within the bound
+    D = (x[None, :] - creep_lags(t, x, TAUS[:m])).T  # (n, m): what each lag falls short of the displacement
     D = D - D.mean(axis=0)
     r = residual - residual.mean()
     G = D.T @ D
     b = -(D.T @ r)
     best: tuple[float, dict[str, float] | None] = (0.0, None)
-    m = int(np.searchsorted(TAUS, tau_max * (1 + 1e-9), side="right"))  # the lags within the bound
     for i in range(m):
         for j in range(i + 1, m):
             A = G[np.ix_([i, j], [i, j])]
