@@ -82,7 +82,7 @@ class IdentConfig:
             raise ValueError(f"method must be one of {', '.join(METHODS)}")
         if self.admissible and self.model == "pi":
             raise ValueError("admissible applies to mbw and bw (Remark 4.1 and their rate terms), not pi")
-        self.user_config()  # the effects and their configuration, checked before any bag is fitted
+        self.check_effect_config()  # the effects and their configuration, checked before any bag is fitted
         if self.watch_dir and not Path(self.watch_dir).is_dir():
             raise ValueError(f"watch_dir {self.watch_dir!r} is not a directory")
         if self.params_file and not Path(self.params_file).parent.is_dir():
@@ -93,9 +93,9 @@ class IdentConfig:
             raise ValueError("controller_node must be a fully qualified node name such as /hyst_controller")
         return self
 
-    def user_config(self) -> dict:
-        """``effect_config`` as a configuration, checked: each item ``EFFECT.KEY=VALUE`` for a listed effect, and
-        the model with it buildable (an unknown effect or form is refused with the effect's own reason)."""
+    def check_effect_config(self) -> None:
+        """Refuse (ValueError, with the reason) an ``effect_config`` item that is not ``EFFECT.KEY=VALUE`` for a
+        listed effect, or a model that cannot be built with it (an unknown effect or form: the effect's reason)."""
         from .errors import HystError
         from .spec import build_model, parse_effect_config
         try:
@@ -103,7 +103,6 @@ class IdentConfig:
             build_model(self.model, self.effects, {"dt": 1e-3, "u_scale": 1.0, "y_scale": 1.0, **user})
         except HystError as err:
             raise ValueError(str(err)) from err
-        return user
 
 
 def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:

@@ -171,7 +171,7 @@ class Creep(Effect):
         return float(theta[0]) * TAUS.size / PER_DECADE, TAUS, _weights(float(theta[1]))
 
     def output(self, theta, t, u, y):
-        if self.form == "log":
+        if self.form == "log":  # its own expression: the log form's outputs stay bit for bit what they were
             gain, tilt = float(theta[0]), float(theta[1])
             return y if gain == 0.0 else y - gain * creep_term(t, y, tilt)
         g, taus, w = self.bank(theta)
