@@ -108,7 +108,7 @@ class IdentConfig:
 def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     """Fit ``cfg.model`` (+ effects) to one bag; returns ``(summary, model, result, dt)``. Pure: no ROS."""
     from .identify import fit
-    from .identify.admissible import check_admissible, constrain
+    from .identify.admissible import check_admissible, constrain, constrained_summary
     from .identify.input_range import identified_range
     from .io import read_state_bag, regularise
     from .models import data_config
@@ -126,9 +126,10 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed, split=split)
     constrained = None
     if cfg.admissible:  # as hyst fit --admissible: Remark 4.1 and passive rate terms, at a stated cost
+        free_adm = check_admissible(model, res.theta)  # its violations, for the summary (validate refused pi)
         con = constrain(model, rec.t, rec.u, rec.y, res.theta, split)
         if con is not None:
-            constrained, res = {"free_rmse": res.rmse, "rmse": con.rmse}, con
+            constrained, res = constrained_summary(res.rmse, free_adm.violations, con.rmse), con
     # Remark 4.1, parameters on their bounds and a divergence probe on the record's input range, as hyst fit
     # reports them; the model is still written and pushed (the controller probes it against its own limits).
     adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))

@@ -72,3 +72,18 @@ def test_diagnose_admissible_saves_the_model_hyst_fit_admissible_gives(capsys, t
     spec = read_params(out)
     assert spec.fit["rmse"] == pytest.approx(d["constrained"]["rmse"]) and spec.values["psi2"] >= 0
     assert spec.fit["admissible"].startswith("Remark 4.1 and passive rate terms")  # as hyst fit --admissible
+
+
+def test_admissible_on_a_model_without_alpha_psi_is_refused_with_one_message(capsys, tmp_path):
+    """--admissible on the Prandtl-Ishlinskii model (no α/ψ terms): one clear message and exit 2, as the ident
+    node refuses admissible:=true with model pi at set time; no params file is written."""
+    from hyst_model.cli.main import main
+    t = np.arange(3000) * 1e-3
+    u = 75.0 + 70.0 * np.sin(2 * np.pi * 2.0 * t)
+    y = 1e-7 * u + 1e-9 * np.random.default_rng(0).standard_normal(t.size)
+    data = tmp_path / "rec.csv"
+    np.savetxt(data, np.column_stack([t, u, y]), delimiter=",", header="t,u,y", comments="")
+    out = tmp_path / "p.yaml"
+    assert main(["fit", str(data), "--model", "pi", "--admissible", "--quiet", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "no alpha/psi terms" in err and "Traceback" not in err and not out.exists()

@@ -196,6 +196,7 @@ def test_admissible_refits_a_fit_outside_remark_4_1_or_with_a_negative_rate_term
     assert not outside(model, res_c.theta) and con["admissibility"]["remark_4_1"] is True
     assert con["admissibility"]["bounded"] is True
     assert con["constrained"]["free_rmse"] == pytest.approx(res_f.rmse, rel=1e-6)
+    assert any("psi2" in v for v in con["constrained"]["free_violations"]), con["constrained"]  # as hyst fit's JSON
     assert res_f.rmse <= con["rmse"] == con["constrained"]["rmse"]
     ok_summary, _, _, _ = fit_bag(str(_bag(tmp_path / "clean")), IdentConfig(admissible=True))
     c = ok_summary["constrained"]  # a stage inside the set (the default's): the constraint costs next to nothing

@@ -124,14 +124,13 @@ def run(args: argparse.Namespace) -> int:
     adm = check_admissible(fm, fth, record=(rec.t, rec.u, rec.y))
     rmse_v, rmse_t, constrained = best.rmse, best.rmse_train, None
     if args.admissible:
-        if adm.remark_4_1 is None:
-            raise HystError(f"--admissible: model {best.model} has no alpha/psi terms; Remark 4.1 does not apply")
         from ..diagnose.refit import validation_mask
         from ..effects.signals import fmt_len
-        from ..identify.admissible import constrain
+        from ..identify.admissible import constrain, constrained_summary, require_remark
+        require_remark(adm, best.model)
         con = constrain(fm, rec.t, rec.u, rec.y, fth, validation_mask(len(rec.t), rec.u))  # diagnose's own split
         if con is not None:
-            constrained = {"free_rmse": best.rmse, "free_violations": adm.violations, "rmse": con.rmse}
+            constrained = constrained_summary(best.rmse, adm.violations, con.rmse)
             fth, rmse_v, rmse_t = con.theta, con.rmse, con.rmse_train
             d.models[best.model] = (fm, fth)
             adm = check_admissible(fm, fth, record=(rec.t, rec.u, rec.y))

@@ -162,14 +162,13 @@ def run(args) -> int:
     from ..identify.admissible import check_admissible
     adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
     constrained = None
-    if args.admissible and adm.remark_4_1 is None:
-        raise HystError(f"--admissible: model {args.model} has no alpha/psi terms; Remark 4.1 does not apply")
     if args.admissible:
-        from ..identify.admissible import constrain
+        from ..identify.admissible import constrain, constrained_summary, require_remark
+        require_remark(adm, args.model)
         con = constrain(model, rec.t, rec.u, rec.y, res.theta, split)
         if con is not None:
             free, res = res, con
-            constrained = {"free_rmse": free.rmse, "free_violations": adm.violations, "rmse": res.rmse}
+            constrained = constrained_summary(free.rmse, adm.violations, res.rmse)
             adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
             if not args.quiet:
                 print(f"hyst fit: Remark 4.1 and passive rate terms (ψ ≥ 0) enforced: validation RMSE "
@@ -189,7 +188,7 @@ def run(args) -> int:
         prov.update(identified_range(rec.u))
         if constrained:
             from ..identify.admissible import provenance
-            prov["admissible"] = provenance(free.rmse)
+            prov["admissible"] = provenance(constrained["free_rmse"])
         write_params(out, spec_from_model(model, res.theta, fit=prov, dt=rec.dt), force=args.force)
     if args.json:
         obj = {"model": args.model, "effects": effects, "method": args.method, "rmse": res.rmse,

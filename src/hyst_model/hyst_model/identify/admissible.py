@@ -14,11 +14,12 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..core.bounded import DIVERGENCE_SPANS, probe_range
+from ..errors import FitError
 from ..model import Model
 from .result import FitResult
 
 __all__ = ["Admissibility", "check_admissible", "probe_bounded", "AdmissibleModel", "fit_admissible", "MARGIN",
-           "outside", "constrain", "provenance",
+           "outside", "constrain", "provenance", "constrained_summary", "require_remark",
            "DIVERGENCE_SPANS"]
 
 @dataclass
@@ -207,6 +208,18 @@ def constrain(model, t, u, y, theta, split) -> FitResult | None:
     res.rmse = float(np.sqrt(np.mean(e[sp.val_index()] ** 2))) if sp.has_validation else res.rmse
     res.rmse_train = float(np.sqrt(np.mean(e[sp.train_index()] ** 2)))
     return res
+
+
+def require_remark(adm: Admissibility, model_name: str, option: str = "--admissible") -> None:
+    """Refuse a constrained fit of a model without α/ψ terms (``option`` names the setting the user gave)."""
+    if adm.remark_4_1 is None:
+        raise FitError(f"{option}: model {model_name} has no alpha/psi terms; Remark 4.1 does not apply")
+
+
+def constrained_summary(free_rmse: float, free_violations: list[str], rmse: float) -> dict:
+    """The ``constrained`` object of the JSON and the ident node's summary: what the free fit validated at, what it
+    violated, and what the constrained one validates at (hyst fit, hyst diagnose and the ident node alike)."""
+    return {"free_rmse": float(free_rmse), "free_violations": list(free_violations), "rmse": float(rmse)}
 
 
 def provenance(free_rmse: float) -> str:
