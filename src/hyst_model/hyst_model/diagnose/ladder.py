@@ -137,14 +137,19 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
             r_s, nm, vals, var = item
             own.cfg.update(var)
             options = []  # (model, θ, residual)
-            try:
-                mm, tth, yh = guarded_refit(own.base_model, order + [nm], own.cfg, t, u, y, val,
-                                            {**prev_m.unpack(prev_th), **vals},
-                                            theta_base=prev_c.split(prev_th)[0],
-                                            carry=_effect_values(prev_m, prev_th), fitter=own.fit, prior=vals)
-                options.append((mm, tth, y - yh))
-            except (EffectError, FitError):
-                pass
+            rung_vals = _effect_values(prev_m, prev_th)
+            for start, kept in _value_starts(own, order, nm, vals, carry.get(nm), nm in screened):
+                try:
+                    # the screen's values only where the effect's own data start gives none (``prior``); its own
+                    # values from the base over that start (``carry``)
+                    mm, tth, yh = guarded_refit(own.base_model, order + [nm], own.cfg, t, u, y, val,
+                                                {**prev_m.unpack(prev_th), **start},
+                                                theta_base=prev_c.split(prev_th)[0],
+                                                carry={**rung_vals, **start} if kept else rung_vals,
+                                                prior=None if kept else start, fitter=own.fit)
+                    options.append((mm, tth, y - yh))
+                except (EffectError, FitError):
+                    pass
             # A screen that refitted jointly from the base (delay, asymmetry) may have found a better basin than
             # the refit carrying this rung's values: never go back from a model already found (a creep rung with
             # an overdamped 21 Hz "mode" refitted to 39.7 nm, while the screen from the base had reached 2.15 nm).
@@ -204,6 +209,31 @@ def _rung_variants(s: Setup, nm: str) -> list[dict]:
                 continue
         out.append(v)
     return out or [{}]
+
+
+def _value_starts(s: Setup, order: list, nm: str, screened: dict, own: dict | None, refitted: bool
+                  ) -> list[tuple[dict, bool]]:
+    """Effect values a rung's refit of ``nm`` starts from, each with whether it overrides the effect's own data start:
+    its screen's on the rung (it does not), and — for an effect screened with the rung held fixed — its own values
+    from its joint refit with the base alone (``own``; it does), when they belong to the configuration screened and
+    differ.
+
+    A screen with the rung held fixed can move an effect away from where it stands with the base free: on generated
+    GMA stage 3000163 (two-lag creep and two modes) the mode's values refitted with the base alone (13.8 nm)
+    screened on the creep rung at 34.9 nm, the refit from that screen ended at 14.6 nm (4.1× the noise floor),
+    while the creep rung refitted with the mode's own values reaches 1.33× the floor. An effect whose screen was
+    itself a joint refit from those values (``refitted``) has been tried from them already.
+    """
+    starts = [(screened, False)]
+    if refitted or not own or own == screened:
+        return starts
+    try:
+        names = set(compose(s.base_model, order + [nm], s.cfg).names)
+    except EffectError:
+        return starts
+    if all(k in names for k in own):
+        starts.append((own, True))
+    return starts
 
 
 #: How many of a rung's best refits are also tried with the new effect innermost (:func:`_other_order`).
