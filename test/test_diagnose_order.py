@@ -60,3 +60,18 @@ def test_an_effects_configuration_is_chosen_again_on_the_rung(behind_a_delay):
     m, _ = d.models[d.ladder[-1].model]
     assert m.config().get("asymmetry.form") == "quadratic", m.config()
     assert d.ladder[-1].rmse < 1.5 * d.noise, (d.ladder[-1].rmse, d.noise)
+
+
+def test_a_kink_behind_creep_is_started_from_the_rungs_own_residual():
+    """Generated PEA stage 3000102 (steps): log creep and a gain kink. On the creep rung the kink was started only
+    from its values refitted with the base alone and from the bare base, its level and slope read off a residual
+    full of creep transients: its screen ended at 31-39 nm, worse than the rung's 17.6 nm, and the kink was never
+    named (creep + drift). Started also from the rung's own residual it screens at 13.4 nm and is named."""
+    from hyst_model.diagnose.diagnose import diagnose
+    from hyst_sim.generator import generate_case
+
+    c = generate_case(3000102, "pair")
+    assert set(c.expected) == {"creep", "asymmetry"}
+    d = diagnose(c.t, c.u, c.y)
+    assert {"creep", "asymmetry"} <= set(d.ladder[-1].effects), d.explanation
+    assert d.ladder[-1].rmse < 1.5 * d.noise, d.explanation

@@ -139,12 +139,18 @@ def screen_on(s: Setup, inner: Model, th_inner: np.ndarray, chosen: list, nm: st
     t, u, y, val = s.t, s.u, s.y, s.val
     if compose(s.base_model, [nm], s.cfg).effects[-1].screen_with_refit():
         # On a rung, from the bare base and from the rung's point (its base parameters and effect values), the
-        # better kept: each start alone lost a case — behind a 6-sample delay the quadratic bow refitted from the
+        # best kept: each start alone lost a case — behind a 6-sample delay the quadratic bow refitted from the
         # bare base ended at 1.04 µm against the rung's 48.9 nm (and the kink was kept), while a 520 Hz mode
         # behind creep was found only from the bare base (from the creep rung: a 21 Hz look-alike).
         starts = [(s.th_base, prior)]
         if isinstance(inner, ComposedModel):
             starts.append((inner.split(th_inner)[0], {**_effect_values(inner, th_inner), **(prior or {})}))
+            if prior:
+                # and from the rung's point with the effect's own start read off the rung's residual (refit's
+                # _start_on_carried): the values it took on the base alone can be far from what the rung leaves
+                # (generated stage 3000102: a gain kink behind creep screened at 31-39 nm from those, worse than
+                # the rung's 17.6 nm; from the rung's residual 13.4 nm, and it was named)
+                starts.append((inner.split(th_inner)[0], _effect_values(inner, th_inner)))
         best = None
         for th_b, keep in starts:
             try:
