@@ -126,10 +126,10 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed, split=split)
     constrained = None
     if cfg.admissible:  # as hyst fit --admissible: Remark 4.1 and passive rate terms, at a stated cost
-        free_adm = check_admissible(model, res.theta)  # its violations, for the summary (validate refused pi)
         con = constrain(model, rec.t, rec.u, rec.y, res.theta, split)
-        if con is not None:
-            constrained, res = constrained_summary(res.rmse, free_adm.violations, con.rmse), con
+        if con is not None:  # the free fit's violations for the summary, as hyst fit's JSON names them
+            constrained = constrained_summary(res.rmse, check_admissible(model, res.theta).violations, con.rmse)
+            res = con
     # Remark 4.1, parameters on their bounds and a divergence probe on the record's input range, as hyst fit
     # reports them; the model is still written and pushed (the controller probes it against its own limits).
     adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
