@@ -72,12 +72,14 @@ def test_topics_match_in_process_and_switching_is_bumpless(loop_processes):
     rclpy.init()
     node = rclpy.create_node("closed_loop_test")
     states: dict[float, float] = {}
+    applied: dict[float, float] = {}  # the voltage the sim applied at each state (effort[0])
     cmds: dict[float, float] = {}
     latest = [0.0]  # newest state stamp, kept in the callback: max(states) per spin would be O(n) per message
 
     def on_state(m) -> None:
         t = _stamp(m)
         states[t] = m.position[0]
+        applied[t] = m.effort[0]
         latest[0] = max(latest[0], t)
 
     # keep-all: while this node is busy (not spinning) the lockstep loop waits for it instead of its history
@@ -139,13 +141,18 @@ def test_topics_match_in_process_and_switching_is_bumpless(loop_processes):
     # Commands carry the stamp of the state they answer (the lockstep sim stalls on any other stamp, so reaching
     # T_END already proves every state was answered): every received command stamp is a state stamp k/rate.
     ts = np.array(sorted(cmds))
-    u = np.array([cmds[k] for k in ts])
     k = ts * RATE
     assert np.allclose(k, np.round(k), atol=1e-3) and len(ts) > 0.5 * T_END * RATE
-    consecutive = np.isclose(np.diff(ts), 1.0 / RATE)  # the test's own subscriber may drop messages
+    # Bumplessness is judged on the voltage the sim applied, carried by every state: the command stream the
+    # test hears may start late (its discovery of the controller's publisher races the lockstep loop; on a
+    # loaded CI machine it heard none of 1-5 s), the state stream cannot (the sim waited for this node).
+    ta = np.array(sorted(applied))
+    u = np.array([applied[k] for k in ta])
+    consecutive = np.isclose(np.diff(ta), 1.0 / RATE)
     du = np.abs(np.diff(u))
-    tc = ts[1:]
+    tc = ta[1:]
     steady = consecutive & (tc >= 1.0) & (tc < 5.0)
+    assert steady.sum() > 1000
     typical = du[steady].max()
     pairs = set()
     e_all = y - ref(t)
