@@ -11,9 +11,11 @@ from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
+from .alike import alike_refits
 from .parallel import pmap
 from .refit import _effect_values, guarded_refit, paired_t, refit, rmse
-from .stages import Candidate, Rung, Setup, effect_variants, own_config, screen_on, variant_suffix
+from .stages import (Candidate, Rung, Setup, effect_variants, own_config, screen_on, variant_label,
+                     variant_suffix)
 
 __all__ = ["climb", "prefer_simpler", "n_params", "effect_order", "STRONG_SIGNATURE", "SIGNATURE_MARGIN",
            "OTHER_ORDER_TOP"]
@@ -166,6 +168,8 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
             break
         _other_order(s, trial, prev_m, cur_val)
         _fresh_start(s, trial, cur_val)
+        # and with a carried effect in a configuration the base could not tell from the one kept (:mod:`.alike`)
+        _retry_best(s, trial, cur_val, lambda own, i: alike_refits(own, trial[i], cands))
         good = [x for x in trial if cur_val / x[0] >= s.min_factor and paired_t(cur_e[val], x[4][val]) >= s.t_min]
         pick, why = prefer_simpler(s, [(x[1], x[0], x[4], cands[x[1]].score) for x in good]) if good else (-1, "")
         # Every candidate refitted on top of this rung now stands for what it adds to it (the ranking of those
@@ -176,7 +180,12 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
         if not good:
             break
         r, nm, mm, tth, e = good[pick]
-        s.cfg.update(own_config(mm, nm))  # the configuration it was taken in, for the rungs and the prune after
+        for x in effect_order(mm):  # the configurations it was taken in (a carried effect's may have changed:
+            now = own_config(mm, x)  # .alike), for the rungs and the prune after
+            if x != nm and x in cands and any(s.cfg.get(k) != v for k, v in now.items()):
+                cands[x].note = _join(cands[x].note, f"with {nm} on top it was refitted in {variant_label(now)} "
+                                      "(the base alone could not tell the two apart)")
+            s.cfg.update(now)
         c = cands[nm]
         c.note = why
         _on_top(s, c, chosen, cur_e, cur_val, good[pick], significant=True)
@@ -185,6 +194,10 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
         models[mm.name] = (mm, tth)
         cur_e = e
     return ladder, models, chosen
+
+
+def _join(a: str, b: str) -> str:
+    return f"{a}; {b}" if a else b
 
 
 def _rung_variants(s: Setup, nm: str) -> list[dict]:

@@ -64,6 +64,10 @@ class Candidate:
     #: The second-best screened configuration, ``(effect values, variant)``, when the screens held the base fixed:
     #: refitted jointly too (:func:`refit_all`). Not reported.
     runner_up: tuple | None = None
+    #: ``(variant, values)`` of each configuration whose screen validated within ``min_factor`` of the best
+    #: one's, the kept one included, with the base and effect values it reached: the record could not choose
+    #: between them on the base, so the ladder refits its rungs in the others too (:mod:`.alike`). Not reported.
+    alike: list = field(default_factory=list)
 
 
 @dataclass
@@ -286,9 +290,11 @@ def _screened(s: Setup, nm: str, results: list[dict]) -> tuple[Candidate, dict |
     done: tuple | None = None
     var: dict = {}
     runner_up = None
+    alike: list = []
     if tried:
         tried.sort(key=lambda x: x[0])
         r, var, vals, done = tried[0]
+        alike = [(vv, _values_at(s, vl, dn)) for rv, vv, vl, dn in tried if np.isfinite(rv) and rv < s.min_factor * r]
         if len(tried) > 1 and done is None and tried[1][3] is None and np.isfinite(tried[1][0]):
             runner_up = (tried[1][2], tried[1][1])
         if len(tried) > 1:
@@ -299,10 +305,17 @@ def _screened(s: Setup, nm: str, results: list[dict]) -> tuple[Candidate, dict |
         ev = f"{ev}; the fit failed: {'; '.join(x['error'] for x in results)}"
     base_val = s.base_val
     cand = Candidate(nm, r, math.nan, base_val / r if r > 0 else math.inf, False, score, ev, params=vals or {},
-                     runner_up=runner_up)
+                     runner_up=runner_up, alike=alike if len(alike) > 1 else [])
     s.say(f"screen {s.base}+{nm}: validation RMSE {fmt_len(r)} ({base_val / r:.2f}×), residual test "
           f"{score:.2f}, {sum(x['seconds'] for x in results):.1f} s")
     return cand, vals, done, var
+
+
+def _values_at(s: Setup, vals: dict, done: tuple | None) -> dict:
+    """Base and effect values of a screen: its joint refit's, or the fitted base's and the screened effect's."""
+    if done is not None:
+        return dict(done[0].unpack(done[1]))
+    return {**s.base_model.unpack(s.th_base), **vals}
 
 
 def refit_all(s: Setup, cands: dict, carry: dict, full: dict) -> list:
@@ -422,7 +435,7 @@ def _rescreen(s: Setup, cands: dict, carry: dict, full: dict) -> None:
     _refit_each(s, again, again_carry, again_full)
     for nm, c in again.items():
         new, old = again_full.get(nm), full.get(nm)
-        cands[nm].score, cands[nm].evidence = c.score, c.evidence
+        cands[nm].score, cands[nm].evidence, cands[nm].alike = c.score, c.evidence, c.alike
         if new is not None and (old is None or rmse(new[2][val]) < rmse(old[2][val])):
             full[nm], carry[nm] = new, again_carry.get(nm, {})
         elif old is not None:  # the first round's refit stays: so does the configuration it was fitted in
