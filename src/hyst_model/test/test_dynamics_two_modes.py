@@ -108,7 +108,7 @@ def test_the_runner_up_configuration_is_kept_for_a_joint_refit():
     """Screens with the base held fixed rank configurations; the second best is handed on to be refitted too,
     unless its screen already was a joint refit or failed."""
     class S:  # the parts of Setup _screened reads
-        base, base_val = "mbw", 3.0
+        base, base_val, min_factor = "mbw", 3.0, 1.1
 
         @staticmethod
         def say(*a, **k):
@@ -120,6 +120,33 @@ def test_the_runner_up_configuration_is_kept_for_a_joint_refit():
     cand, vals, done, var = _screened(S, "dynamics", res)
     assert isinstance(cand, Candidate) and var == one and vals == {"fn": 400.0}
     assert cand.runner_up == ({"fn2": 800.0}, two)
+    assert cand.alike == []  # 2.0 against 1.0: the record chose
     res[2]["done"] = ("model", "theta", "residual")  # a joint refit already: nothing more to refit
     assert _screened(S, "dynamics", res)[0].runner_up is None
     assert _screened(S, "dynamics", res[:1])[0].runner_up is None
+
+
+def test_configurations_that_screen_alike_are_kept_with_their_values():
+    """Configurations within min_factor of the best are handed on with the base and effect values each reached
+    (the ladder refits later rungs in them: diagnose.alike); the kept one is among them."""
+    class Base:
+        @staticmethod
+        def unpack(th):
+            return {"zeta1": th[0]}
+
+    class S:
+        base, base_val, min_factor, base_model, th_base = "mbw", 3.0, 1.1, Base, (0.3,)
+
+        @staticmethod
+        def say(*a, **k):
+            pass
+    log, lags = {"creep.form": "log"}, {"creep.form": "lags"}
+    joint = (type("M", (), {"unpack": staticmethod(lambda th: {"zeta1": 0.25, "creep.gain": th})}), 0.06, None)
+    res = [{"var": log, "r": 1.05, "vals": {"creep.gain": 0.06}, "done": joint, "score": 0.5, "ev": "e",
+            "seconds": 0.1},
+           {"var": lags, "r": 1.0, "vals": {"creep.gain": 0.1}, "done": None, "seconds": 0.1}]
+    cand, vals, done, var = _screened(S, "creep", res)
+    assert var == lags
+    assert cand.alike == [(lags, {"zeta1": 0.3, "creep.gain": 0.1}), (log, {"zeta1": 0.25, "creep.gain": 0.06})]
+    res[0]["r"] = 1.2  # no longer within 1.1x: the record chose
+    assert _screened(S, "creep", res)[0].alike == []

@@ -294,7 +294,8 @@ def _screened(s: Setup, nm: str, results: list[dict]) -> tuple[Candidate, dict |
     if tried:
         tried.sort(key=lambda x: x[0])
         r, var, vals, done = tried[0]
-        alike = [(vv, _values_at(s, vl, dn)) for rv, vv, vl, dn in tried if np.isfinite(rv) and rv < s.min_factor * r]
+        close = [x for x in tried if np.isfinite(x[0]) and x[0] < s.min_factor * r]
+        alike = [(vv, _values_at(s, vl, dn)) for _, vv, vl, dn in close] if len(close) > 1 else []
         if len(tried) > 1 and done is None and tried[1][3] is None and np.isfinite(tried[1][0]):
             runner_up = (tried[1][2], tried[1][1])
         if len(tried) > 1:
@@ -305,7 +306,7 @@ def _screened(s: Setup, nm: str, results: list[dict]) -> tuple[Candidate, dict |
         ev = f"{ev}; the fit failed: {'; '.join(x['error'] for x in results)}"
     base_val = s.base_val
     cand = Candidate(nm, r, math.nan, base_val / r if r > 0 else math.inf, False, score, ev, params=vals or {},
-                     runner_up=runner_up, alike=alike if len(alike) > 1 else [])
+                     runner_up=runner_up, alike=alike)
     s.say(f"screen {s.base}+{nm}: validation RMSE {fmt_len(r)} ({base_val / r:.2f}×), residual test "
           f"{score:.2f}, {sum(x['seconds'] for x in results):.1f} s")
     return cand, vals, done, var
