@@ -11,16 +11,13 @@ itself takes — the other configuration's own fit, then the new effect on top o
 """
 from __future__ import annotations
 
-from typing import cast
-
 import numpy as np
 
-from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
 from .refit import _effect_values, _point, guarded_refit, rmse
-from .stages import Setup, own_config, variant_suffix
+from .stages import Setup, effect_order, own_config, variant_suffix
 
 __all__ = ["alike_refits"]
 
@@ -32,8 +29,7 @@ def alike_refits(own: Setup, entry: tuple, cands: dict) -> tuple[Model, np.ndarr
     ``None`` when no carried effect has another alike configuration or every such refit failed."""
     t, u, y, val = own.t, own.u, own.y, own.val
     _, new, mm, tth, _ = entry
-    mc = cast(ComposedModel, mm)
-    names = [e.name for e in mc.effects]
+    names = effect_order(mm)
     vals = _effect_values(mm, tth)
     best = None
     for x in names:

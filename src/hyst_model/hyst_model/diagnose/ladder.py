@@ -14,7 +14,7 @@ from ..model import Model
 from .alike import alike_refits
 from .parallel import pmap
 from .refit import _effect_values, guarded_refit, paired_t, refit, rmse
-from .stages import (Candidate, Rung, Setup, effect_variants, own_config, screen_on, variant_label,
+from .stages import (Candidate, Rung, Setup, effect_order, effect_variants, own_config, screen_on, variant_label,
                      variant_suffix)
 
 __all__ = ["climb", "prefer_simpler", "n_params", "effect_order", "STRONG_SIGNATURE", "SIGNATURE_MARGIN",
@@ -251,11 +251,6 @@ def _value_starts(s: Setup, order: list, nm: str, screened: dict, own: dict | No
 
 #: How many of a rung's best refits are also tried with the new effect innermost (:func:`_other_order`).
 OTHER_ORDER_TOP = 2
-
-
-def effect_order(m: Model) -> list[str]:
-    """The effects of ``m`` in the order it applies them (innermost first); none for a bare base model."""
-    return [e.name for e in m.effects] if isinstance(m, ComposedModel) else []
 
 
 def _other_order(s: Setup, trial: list, prev_m: Model, cur_val: float) -> None:

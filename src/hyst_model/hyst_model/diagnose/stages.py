@@ -23,7 +23,8 @@ from .parallel import pmap
 from .unexplained import Unexplained, explain_unexplained
 
 __all__ = ["Candidate", "Rung", "Setup", "screen_on", "screen_all", "refit_all", "rebase", "verdict",
-           "effect_variants", "own_config", "refit_from_final", "validate_alike", "variant_label", "variant_suffix"]
+           "effect_order", "effect_variants", "own_config", "refit_from_final", "validate_alike", "variant_label",
+           "variant_suffix"]
 
 
 @dataclass
@@ -239,6 +240,11 @@ def effect_variants(s: Setup, nm: str) -> list[dict]:
     a key the user fixed; ``[{}]`` for an effect with one configuration."""
     variants = list(getattr(EFFECTS[nm], "variants", lambda: [{}])()) or [{}]
     return [v for v in variants if not any(k in s.fixed and s.fixed[k] != x for k, x in v.items())] or [{}]
+
+
+def effect_order(m: Model) -> list[str]:
+    """The effects of ``m`` in the order it applies them (innermost first); none for a bare base model."""
+    return [e.name for e in m.effects] if isinstance(m, ComposedModel) else []
 
 
 def own_config(m: Model, nm: str) -> dict:
