@@ -45,3 +45,36 @@ def test_alike_candidates_go_to_the_fewer_parameters_and_a_disagreeing_signature
     i, _ = prefer_simpler(s, [("dynamics", 0.998e-9, e, 0.5), ("creep", 0.999e-9, e2, 0.5),
                               ("delay", 1.0e-9, e2, 0.5)])
     assert i == 2
+
+
+def _blind_setup():
+    n = 8000
+    val = np.zeros(n, dtype=bool)
+    val[::4] = True
+    return SimpleNamespace(val=val, train=~val, noise=1e-9, min_factor=1.1, t_min=3.0), n, val
+
+
+def test_a_rung_validation_cannot_judge_takes_the_refit_training_needs():
+    from hyst_model.diagnose.ladder import training_only
+    s, n, val = _blind_setup()
+    rng = np.random.default_rng(2)
+    noise = rng.normal(0, 1e-9, n)
+    miss = np.where(val, 0.0, 8e-9 * np.sin(np.arange(n) / 7.0))  # an error only the training samples show
+    cur = noise + miss
+    cur_val = float(np.sqrt(np.mean(cur[val] ** 2)))
+    fixed = noise + rng.normal(0, 1e-11, n)                # a refit that removes it
+    half = noise + 0.5 * miss                              # one that removes half of it
+    trial = [(cur_val * 0.999, "delay", None, None, half), (cur_val, "dynamics", None, None, fixed)]
+    ok, pick, why = training_only(s, trial, cur, cur_val)
+    assert [x[1] for x in ok] == ["delay", "dynamics"] and ok[pick][1] == "dynamics"
+    assert "training part's evidence" in why and "validation does not rise" in why
+    # a refit that is worse on validation at all is not taken
+    ok, pick, _ = training_only(s, [(cur_val * 1.01, "dynamics", None, None, fixed)], cur, cur_val)
+    assert ok == [] and pick == -1
+    # nor anything when the rung trains as well as it validates: the hold-out sees what training sees
+    ok, _, _ = training_only(s, trial, noise, float(np.sqrt(np.mean(noise[val] ** 2))))
+    assert ok == []
+    # nor a refit that helps training too little (below min_factor)
+    slight = noise + 0.95 * miss
+    ok, _, _ = training_only(s, [(cur_val, "creep", None, None, slight)], cur, cur_val)
+    assert ok == []

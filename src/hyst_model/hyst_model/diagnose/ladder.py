@@ -12,13 +12,14 @@ from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
 from .alike import alike_refits
+from .blind import training_only
 from .parallel import pmap
 from .refit import _effect_values, guarded_refit, paired_t, refit, rmse
 from .stages import (Candidate, Rung, Setup, effect_order, effect_variants, own_config, screen_on, variant_label,
                      variant_suffix)
 
-__all__ = ["climb", "prefer_simpler", "n_params", "effect_order", "STRONG_SIGNATURE", "SIGNATURE_MARGIN",
-           "OTHER_ORDER_TOP"]
+__all__ = ["climb", "prefer_simpler", "training_only", "n_params", "effect_order", "STRONG_SIGNATURE",
+           "SIGNATURE_MARGIN", "OTHER_ORDER_TOP"]
 
 
 def n_params(s: Setup, nm: str) -> int:
@@ -85,7 +86,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
     sig = [c for c in ranked if c.significant and c.effect in full]
     pick, why = prefer_simpler(s, [(c.effect, c.rmse, full[c.effect][2], c.score) for c in sig])
     best = sig[pick]
-    best.note = why
+    best.note = why or best.note  # a candidate taken on the training part's evidence keeps saying so
     m, th, e = full[best.effect]
     chosen.append(best.effect)
     ladder.append(Rung(m.name, list(chosen), best.rmse, best.rmse_train))
@@ -93,8 +94,8 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
     cur_e = e
     while len(chosen) < s.max_rungs:
         cur_val = rmse(cur_e[val])
-        if cur_val <= s.noise_margin * s.noise:
-            break
+        if cur_val <= s.noise_margin * s.noise and not rmse(cur_e[train]) >= s.min_factor * max(cur_val, s.noise):
+            break  # at the floor on validation, and training shows nothing more (:func:`training_only`)
         # A second effect is often masked by the first when tested alone: screen every remaining one on top of
         # the current rung, then refit the best at full rate.
         prev_m, prev_th = models[ladder[-1].model]
@@ -172,6 +173,8 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
         _retry_best(s, trial, cur_val, lambda own, i: alike_refits(own, trial[i], cands))
         good = [x for x in trial if cur_val / x[0] >= s.min_factor and paired_t(cur_e[val], x[4][val]) >= s.t_min]
         pick, why = prefer_simpler(s, [(x[1], x[0], x[4], cands[x[1]].score) for x in good]) if good else (-1, "")
+        if not good:  # none validated: one the hold-out cannot see may still be needed where training looks
+            good, pick, why = training_only(s, trial, cur_e, cur_val)
         # Every candidate refitted on top of this rung now stands for what it adds to it (the ranking of those
         # the ladder does not take is by that, not by what each did alone on the base).
         for x in trial:

@@ -1,0 +1,53 @@
+"""Evidence the hold-out cannot give: a rung (or the base) whose validation blocks miss where an effect acts.
+
+The validation blocks of :func:`~.refit.validation_mask` sample every part of the excitation in time, but not
+every amplitude or every corner of it. Where an effect acts only there, no refit validates better, while the
+training error — on the samples the model was fitted to, which a fitted model matches at least as well as held-out
+ones — stays above the validation error. :func:`training_only` then applies the validation test to the training
+part. The backward step asks the training part the same way (:func:`~.prune._needed_in_training`).
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..effects.signals import fmt_len
+from .refit import paired_t, rmse
+
+if TYPE_CHECKING:  # stages calls this module on the base's refits
+    from .stages import Setup
+
+__all__ = ["training_only"]
+
+
+def training_only(s: "Setup", trial: list, cur_e: np.ndarray, cur_val: float) -> tuple[list, int, str]:
+    """The refits ``trial`` (validation RMSE, name, model, θ, residual) on top of a rung — or the base — with
+    residual ``cur_e`` that only the training part can judge: ``(those, index of the one to take, why)``, or
+    ``([], -1, "")``.
+
+    The validation blocks sample every part of the excitation, but not every amplitude or every corner of it:
+    where an effect acts only there (a mode rung by the largest triangles' corners, a limit only the largest
+    excursion reaches), no refit validates better, while the rung's training error stays far above the floor
+    (generated GMA stage 3300139, warm-up drift and a 0.6 % mode: the drift rung validates at 1.26× the noise
+    floor and trains at 20×; the fresh record, with the large triangles, was 18.7× the floor, the true effects
+    give 1.7×). Such a rung shows it: its training error — on the samples it was fitted to, which a fitted
+    model matches at least as well as held-out ones — exceeds its validation error by ``min_factor``. A refit
+    is then taken on the training part's evidence by the test validation would apply (``min_factor`` and the
+    paired t, :func:`~.prune._needed_in_training` keeps it the same way), if it is no worse on validation at
+    all; of several, the best on training."""
+    tr = s.train
+    cur_tr = rmse(cur_e[tr])
+    if not (cur_val > 0 and cur_tr / cur_val >= s.min_factor):
+        return [], -1, ""
+    ok = [x for x in trial if x[0] <= cur_val and cur_tr / rmse(x[4][tr]) >= s.min_factor
+          and paired_t(cur_e[tr], x[4][tr]) >= s.t_min]
+    if not ok:
+        return [], -1, ""
+    pick = min(range(len(ok)), key=lambda i: rmse(ok[i][4][tr]))
+    r_tr = rmse(ok[pick][4][tr])
+    why = (f"taken on the training part's evidence: the validation blocks do not reach where it acts (the model "
+           f"below validates at {fmt_len(cur_val)}, {cur_val / s.noise:.2g}× the noise floor, but trains at "
+           f"{fmt_len(cur_tr)}); with it training falls to {fmt_len(r_tr)} (paired t "
+           f"{paired_t(cur_e[tr], ok[pick][4][tr]):.1f}) and validation does not rise ({fmt_len(ok[pick][0])})")
+    return ok, pick, why
