@@ -44,7 +44,8 @@ def test_a_base_at_the_floor_on_validation_only_still_gets_its_mode():
     c = generate_case(3200004, "single_small")
     assert c.expected == ("dynamics",)
     d = diagnose(c.t, c.u, c.y)
-    assert d.baseline_rmse < 1.1 * d.noise and d.baseline_rmse_train > 3.0 * d.noise  # the premise: validation is blind to it
+    # the premise: validation is blind to it
+    assert d.baseline_rmse < 1.1 * d.noise and d.baseline_rmse_train > 3.0 * d.noise
     assert d.missing == "dynamics", d.explanation
     assert "training part's evidence" in d.candidates[0].evidence, d.candidates[0].evidence
     fm, fth = d.models[d.ladder[-1].model]

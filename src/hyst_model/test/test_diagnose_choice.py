@@ -78,3 +78,25 @@ def test_a_rung_validation_cannot_judge_takes_the_refit_training_needs():
     slight = noise + 0.95 * miss
     ok, _, _ = training_only(s, [(cur_val, "creep", None, None, slight)], cur, cur_val)
     assert ok == []
+
+
+def test_a_function_of_time_is_taken_on_training_only_before_the_first_validation_block():
+    from hyst_model.diagnose.ladder import training_only
+    n = 8000
+    val = np.zeros(n, dtype=bool)
+    val[2000::4] = True  # the blocks begin at sample 2000
+    s = SimpleNamespace(val=val, train=~val, noise=1e-9, min_factor=1.1, t_min=3.0)
+    rng = np.random.default_rng(3)
+    noise = rng.normal(0, 1e-9, n)
+    k = np.arange(n)
+    late = np.where(val | (k < 2000), 0.0, 6e-9 * np.sin(k / 50.0))  # training-only error between the blocks
+    early = np.where(k < 2000, 6e-9 * np.exp(-k / 400.0), 0.0)  # a warm-up over before the first block
+    for miss, taken in ((late, False), (early, True)):
+        cur = noise + miss
+        cur_val = float(np.sqrt(np.mean(cur[val] ** 2)))
+        trial = [(cur_val, "drift", None, None, noise.copy())]
+        ok, _, _ = training_only(s, trial, cur, cur_val)
+        assert bool(ok) is taken
+        # an input-dependent effect is judged on the whole training part
+        ok, _, _ = training_only(s, [(cur_val, "dynamics", None, None, noise.copy())], cur, cur_val)
+        assert ok

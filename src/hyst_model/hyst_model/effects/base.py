@@ -105,6 +105,10 @@ class Effect:
     #: An output effect that acts sample by sample on its inner signal (y_k = g(x_k, u_k, t_k)): its derivative
     #: is found once for the whole record when the fitters carry the base's sensitivities through it.
     pointwise: bool = False
+    #: Its output is a function of time alone, not of the input (drift): validation blocks interleaved in time
+    #: sample it everywhere but before the first block, so only there can training alone show it
+    #: (:mod:`hyst_model.diagnose.blind`).
+    of_time: bool = False
     #: Its per-sample form (:meth:`online`) predicts with the base model, so it is exact only directly on the base
     #: (a Smith predictor, the series resonance): the controllers move it inward past linear effects.
     on_base: bool = False

@@ -52,6 +52,7 @@ class Drift(Effect):
                "error at the same input level differs between early and late in the record.")
     kind = "output"
     pointwise = True
+    of_time = True
     online_note = ("an input-independent offset: estimated from the sensor (a disturbance observer), which needs "
                    "a measurement; the open-loop inverse has none and cannot remove it")
 
