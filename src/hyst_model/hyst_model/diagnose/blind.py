@@ -18,7 +18,7 @@ from .refit import paired_t, rmse
 if TYPE_CHECKING:  # stages calls this module on the base's refits
     from .stages import Setup
 
-__all__ = ["training_only"]
+__all__ = ["training_only", "helps"]
 
 
 def training_only(s: "Setup", trial: list, cur_e: np.ndarray, cur_val: float) -> tuple[list, int, str]:
@@ -45,7 +45,7 @@ def training_only(s: "Setup", trial: list, cur_e: np.ndarray, cur_val: float) ->
     # on top of creep in the lags form — the form's misfit taken as a function of time — and the fresh record went
     # from 1.7× to 4.8× the floor; a warm-up over by the first block, 3400016, is still seen).
     early = tr & (np.arange(tr.size) < int(np.argmax(s.val)))
-    ok = [x for x in trial if x[0] <= cur_val and _helps(s, tr & early if _of_time(x[1]) else tr, cur_e, x[4])]
+    ok = [x for x in trial if x[0] <= cur_val and helps(s, tr & early if _of_time(x[1]) else tr, cur_e, x[4])]
     if not ok:
         return [], -1, ""
     pick = min(range(len(ok)), key=lambda i: rmse(ok[i][4][tr]))
@@ -57,8 +57,9 @@ def training_only(s: "Setup", trial: list, cur_e: np.ndarray, cur_val: float) ->
     return ok, pick, why
 
 
-def _helps(s: "Setup", part: np.ndarray, cur_e: np.ndarray, e: np.ndarray) -> bool:
-    """The validation test (``min_factor`` and the paired t) on the samples ``part``."""
+def helps(s: "Setup", part: np.ndarray, cur_e: np.ndarray, e: np.ndarray) -> bool:
+    """Whether residual ``e`` beats ``cur_e`` by the validation test (``min_factor`` and the paired t) on the
+    samples ``part``."""
     r = rmse(e[part])
     return bool(part.any() and r > 0 and rmse(cur_e[part]) / r >= s.min_factor
                 and paired_t(cur_e[part], e[part]) >= s.t_min)

@@ -26,7 +26,7 @@ The engine (:func:`diagnose`)
 6. builds the error ladder greedily: base → + best effect → + the next effect that still helps … with the
    validation RMSE at each rung — where no refit validates better but the rung's training error exceeds its
    validation error (the blocks miss where an effect acts: the largest excursions), by the same test on the
-   training part (:func:`~.ladder.training_only`) —, then takes the backward step of stepwise regression
+   training part (:func:`~.blind.training_only`) —, then takes the backward step of stepwise regression
    (:mod:`.prune`): an effect the others make unnecessary is dropped again.
 """
 from __future__ import annotations

@@ -21,6 +21,7 @@ from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
+from .blind import helps
 from .ladder import effect_order
 from .parallel import pmap
 from .refit import _simulate, paired_t, rmse
@@ -93,6 +94,4 @@ def _needed_in_training(s: Setup, e: np.ndarray, e_full: np.ndarray) -> bool:
     to 60× the noise floor and the fresh record, which reaches the stop, was 54× the floor (with it 1.0×). An
     effect that merely stands in for another leaves the training fit alike once the others are refitted
     without it."""
-    tr = s.train
-    r, r_full = rmse(e[tr]), rmse(e_full[tr])
-    return bool(r_full > 0 and r / r_full >= s.min_factor and paired_t(e[tr], e_full[tr]) >= s.t_min)
+    return helps(s, s.train, e, e_full)

@@ -357,7 +357,7 @@ def refit_all(s: Setup, cands: dict, carry: dict, full: dict) -> list:
         c.significant = bool(not s.at_floor and c.effect in full and c.improvement >= s.min_factor
                              and c.t_stat >= s.t_min)
     if not any(c.significant for c in cands.values()):
-        # none validated: the base's hold-out may miss where one acts (:mod:`.blind`); at most one is taken so
+        # none validated: the base's hold-out may miss where one acts (:mod:`.blind`); one at most is marked
         ok, pick, why = training_only(s, [(rmse(e[val]), nm, m, th, e) for nm, (m, th, e) in full.items()],
                                       s.e_base, base_val)
         if ok:
