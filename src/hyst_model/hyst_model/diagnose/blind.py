@@ -45,7 +45,7 @@ def training_only(s: "Setup", trial: list, cur_e: np.ndarray, cur_val: float) ->
     # on top of creep in the lags form — the form's misfit taken as a function of time — and the fresh record went
     # from 1.7× to 4.8× the floor; a warm-up over by the first block, 3400016, is still seen).
     early = tr & (np.arange(tr.size) < int(np.argmax(s.val)))
-    ok = [x for x in trial if x[0] <= cur_val and helps(s, tr & early if _of_time(x[1]) else tr, cur_e, x[4])]
+    ok = [x for x in trial if x[0] <= cur_val and helps(s, early if _of_time(x[1]) else tr, cur_e, x[4])]
     if not ok:
         return [], -1, ""
     pick = min(range(len(ok)), key=lambda i: rmse(ok[i][4][tr]))
