@@ -15,7 +15,8 @@ def _setup():
     n = 4000
     val = np.zeros(n, dtype=bool)
     val[::4] = True
-    return SimpleNamespace(base_model=build_model("mbw", [], CFG), cfg=dict(CFG), val=val, t_min=3.0), n
+    return SimpleNamespace(base_model=build_model("mbw", [], CFG), cfg=dict(CFG), val=val, train=~val, t_min=3.0,
+                           min_factor=1.1), n
 
 
 def test_the_best_by_validation_wins_when_it_is_significantly_better():
@@ -47,11 +48,31 @@ def test_alike_candidates_go_to_the_fewer_parameters_and_a_disagreeing_signature
     assert i == 2
 
 
+def test_alike_candidates_the_training_part_tells_apart_are_not_taken_for_parsimony():
+    s, n = _setup()
+    rng = np.random.default_rng(4)
+    noise = rng.normal(0, 1e-9, n)
+    miss = np.where(s.val, 0.0, 6e-9 * np.sin(np.arange(n) / 5.0))  # ringing only the training samples show
+    e_delay = noise + miss                            # the simpler one leaves it
+    e_mode = noise + rng.normal(0, 1e-12, n)          # the richer one explains it; both validate alike
+    opts = [("dynamics", 1.0e-9, e_mode, 0.8), ("delay", 0.999e-9, e_delay, 0.1)]
+    i, why = prefer_simpler(s, opts)
+    assert i == 0 and "training part" in why and "validation blocks do not reach" in why
+    i, why = prefer_simpler(s, opts[::-1])  # whatever the order
+    assert i == 1 and "training part" in why
+    # where the training part sees no more than validation, parsimony decides as before
+    i, why = prefer_simpler(s, [("dynamics", 0.999e-9, e_mode, 0.8), ("delay", 1.0e-9, noise.copy(), 0.1)])
+    assert i == 1 and "fewer parameters" in why
+    # a gain on training below min_factor does not overrule parsimony
+    i, _ = prefer_simpler(s, [("dynamics", 0.999e-9, e_mode, 0.8), ("delay", 1.0e-9, noise + 0.1 * miss, 0.1)])
+    assert i == 1
+
+
 def _blind_setup():
     n = 8000
     val = np.zeros(n, dtype=bool)
     val[::4] = True
-    return SimpleNamespace(val=val, train=~val, noise=1e-9, min_factor=1.1, t_min=3.0), n, val
+    return SimpleNamespace(val=val, train=~val, noise=1e-9, min_factor=1.1, t_min=3.0, noise_margin=1.1), n, val
 
 
 def test_a_rung_validation_cannot_judge_takes_the_refit_training_needs():
@@ -68,8 +89,16 @@ def test_a_rung_validation_cannot_judge_takes_the_refit_training_needs():
     ok, pick, why = training_only(s, trial, cur, cur_val)
     assert [x[1] for x in ok] == ["delay", "dynamics"] and ok[pick][1] == "dynamics"
     assert "training part's evidence" in why and "validation does not rise" in why
-    # a refit that is worse on validation at all is not taken
-    ok, pick, _ = training_only(s, [(cur_val * 1.01, "dynamics", None, None, fixed)], cur, cur_val)
+    # at the floor validation cannot tell them apart: a refit a little worse there but within the noise margin
+    # of the floor is taken; one beyond it is not
+    assert cur_val < s.noise_margin * s.noise
+    ok, _, _ = training_only(s, [(cur_val * 1.01, "dynamics", None, None, fixed)], cur, cur_val)
+    assert [x[1] for x in ok] == ["dynamics"]
+    ok, pick, _ = training_only(s, [(1.01 * s.noise_margin * s.noise, "dynamics", None, None, fixed)], cur, cur_val)
+    assert ok == [] and pick == -1
+    # above the floor, a refit worse on validation at all is not taken
+    s_low = SimpleNamespace(**{**vars(s), "noise": 0.5e-9})
+    ok, pick, _ = training_only(s_low, [(cur_val * 1.01, "dynamics", None, None, fixed)], cur, cur_val)
     assert ok == [] and pick == -1
     # nor anything when the rung trains as well as it validates: the hold-out sees what training sees
     ok, _, _ = training_only(s, trial, noise, float(np.sqrt(np.mean(noise[val] ** 2))))
@@ -85,7 +114,7 @@ def test_a_function_of_time_is_taken_on_training_only_before_the_first_validatio
     n = 8000
     val = np.zeros(n, dtype=bool)
     val[2000::4] = True  # the blocks begin at sample 2000
-    s = SimpleNamespace(val=val, train=~val, noise=1e-9, min_factor=1.1, t_min=3.0)
+    s = SimpleNamespace(val=val, train=~val, noise=1e-9, min_factor=1.1, t_min=3.0, noise_margin=1.1)
     rng = np.random.default_rng(3)
     noise = rng.normal(0, 1e-9, n)
     k = np.arange(n)
