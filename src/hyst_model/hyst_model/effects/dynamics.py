@@ -274,20 +274,17 @@ class DynamicsEffect(Effect):
         nothing; the gains are still checked against the mode, :mod:`hyst_control.stability`)."""
         if self.structure != "series" or self.hold != "zoh" or base is None:
             return None
-        if self.modes == 2:
-            self.online_note = ("two modes in cascade have no per-sample inverse here; they act on the loop as "
-                                "unmodelled dynamics (the controller checks its gains against both)")
-            return None
         fn, zeta, part, lag = (float(v) for v in theta[:4])
+        second = (float(theta[4]), float(theta[5])) if self.modes == 2 else None
         try:
-            return SeriesResonanceInverse(fn, zeta, self.dt, base, part, lag)
+            return SeriesResonanceInverse(fn, zeta, self.dt, base, part, lag, second=second)
         except ValueError as err:
             # Read a whole sample into the hold, the mode is the lag-0 mode read one sample later (exactly, at
             # lag 1): inverted as such, with the reference previewed. Within LAG_SNAP of it the rounding is the
             # only error (0.1 sample: 14 degrees at 400 Hz, 2 kHz); further away there is no inverse.
             if abs(lag - 1.0) <= LAG_SNAP:
                 try:
-                    return SeriesResonanceInverse(fn, zeta, self.dt, base, part, 0.0, delay=1)
+                    return SeriesResonanceInverse(fn, zeta, self.dt, base, part, 0.0, delay=1, second=second)
                 except ValueError:
                     pass
             self.online_note = f"{err}; not inverted (the gains are still checked against it)"

@@ -32,6 +32,10 @@ class SeriesResonanceInverse(OnlineEffect):
     the state also carries the previous inner output (its Γ − Γ_b share), and the feed-through is Γ_b; a lag that
     puts the sampled zero outside the unit circle is refused like any other.
 
+    ``second = (fn2, zeta2)``: two modes in cascade behind one hold (``dynamics.modes: 2``), the same recursion on
+    the four-state system of :func:`~.dynamics_kernels.zoh_matrices` read at the second mode's displacement; its
+    inverse exists where the cascade's sampled zeros lie inside the unit circle (refused otherwise, as above).
+
     ``delay`` (whole samples) reads the mode that many samples late: the reference is previewed by it and the
     predictor compares the measurement with the reading ``delay`` samples old. A lag of one sample is exactly that
     (:meth:`DynamicsEffect.online` uses it: the reading then has no feed-through of x_k, so no inverse of its own).
@@ -49,29 +53,34 @@ class SeriesResonanceInverse(OnlineEffect):
     smith = predictive = True
 
     def __init__(self, fn: float, zeta: float, dt: float, base, part: float = 1.0, lag: float = 0.0,
-                 delay: int = 0) -> None:
-        phi, g, gb = zoh_matrices(fn, zeta, dt, lag)
+                 delay: int = 0, second: tuple[float, float] | None = None) -> None:
+        phi, g, gb = zoh_matrices(fn, zeta, dt, lag, second)
+        ns = phi.shape[0]  # (y1, ẏ1) or, two modes in cascade, (y1, ẏ1, y2, ẏ2)
+        self._o = ns - 2  # the state the stage reads: the (last) mode's displacement
         # State z = (s, x_{k−1}): z_k = A z_{k−1} + B x_k reads the mode's s_k = Φ s_{k−1} + (Γ − Γ_b) x_{k−1}
         # + Γ_b x_k (sampling lag, zoh_matrices; lag 0: Γ_b = Γ and x_{k−1} drops out).
-        self._A = np.zeros((3, 3))
-        self._A[:2, :2], self._A[:2, 2] = phi, g - gb
+        self._A = np.zeros((ns + 1, ns + 1))
+        self._A[:ns, :ns], self._A[:ns, ns] = phi, g - gb
         self._B = np.r_[gb, 1.0]
+        self._rest = np.zeros(ns + 1)  # at rest under x: every mode's displacement and the last input are x
+        self._rest[0:ns:2] = self._rest[ns] = 1.0
         self._part = float(part)
-        self._d = (1.0 - self._part) + self._part * float(gb[0])  # feed-through of x_k to y_k
+        what = f"a {fn:g} Hz resonance" + (f" with a second at {second[0]:g} Hz" if second is not None else "")
+        self._d = (1.0 - self._part) + self._part * float(gb[self._o])  # feed-through of x_k to y_k
         if not abs(self._d) > 1e-9:
-            raise ValueError(f"a {fn:g} Hz resonance has no direct feed-through at dt = {dt:g} s")
-        zeros = np.linalg.eigvals(self._A - self._part * np.outer(self._B, self._A[0]) / self._d)
+            raise ValueError(f"{what} has no direct feed-through at dt = {dt:g} s")
+        zeros = np.linalg.eigvals(self._A - self._part * np.outer(self._B, self._A[self._o]) / self._d)
         if np.max(np.abs(zeros)) >= 0.999:
-            raise ValueError(f"the {fn:g} Hz resonance's sampled zero lies on or outside the unit circle"
+            raise ValueError(f"{what}: its sampled zero lies on or outside the unit circle"
                              + (f" (read {lag:.2f} samples into the hold)" if lag > 0 else "")
                              + ": its inverse would diverge")
         self._pred = base()
-        self._s = np.zeros(3)  # resonance state (and the last input) driven by the base model's prediction
+        self._s = np.zeros(ns + 1)  # resonance state (and the last input) driven by the base model's prediction
         if delay < 0:
             raise ValueError("the reading's delay must be a whole number of samples >= 0")
         self.preview = delay * dt
         self._read = np.zeros(delay + 1)  # the model's reading, newest first
-        self._fs = np.zeros(3)  # the same driven by the predicted measurement (forward: may be delayed)
+        self._fs = np.zeros(ns + 1)  # the same driven by the predicted measurement (forward: may be delayed)
         self._m = 0.0  # slow measured mismatch at this effect's output (m), added to what drives _s
         self._innov = math.nan  # the newest reading minus the model's, until observe() takes it
         self._g = min(1.0, dt / MISMATCH_TAU)
@@ -80,7 +89,7 @@ class SeriesResonanceInverse(OnlineEffect):
         self.start(self._pred.reset(u), u)
 
     def start(self, x, u):
-        self._s[:] = self._fs[:] = (x, 0.0, x)
+        self._s[:] = self._fs[:] = x * self._rest
         self._read[:] = x
         self._m, self._innov = 0.0, math.nan
 
@@ -90,8 +99,8 @@ class SeriesResonanceInverse(OnlineEffect):
         self._s = self._A @ self._s + self._B * w
         self._fs = self._A @ self._fs + self._B * z
         self._read[1:] = self._read[:-1]
-        self._read[0] = (1.0 - p) * z + p * float(self._fs[0])
-        return float(self._read[-1]), (1.0 - p) * w + p * float(self._s[0])
+        self._read[0] = (1.0 - p) * z + p * float(self._fs[self._o])
+        return float(self._read[-1]), (1.0 - p) * w + p * float(self._s[self._o])
 
     def mismatch(self, e):
         self._innov = e
@@ -107,4 +116,4 @@ class SeriesResonanceInverse(OnlineEffect):
         return y - read + x_hat
 
     def target(self, r, u):
-        return (r - self._part * float((self._A @ self._s)[0])) / self._d
+        return (r - self._part * float((self._A @ self._s)[self._o])) / self._d
