@@ -1,8 +1,8 @@
 """Benchmark: a full ``hyst diagnose`` of a 60,000-sample record (60 s at 1 kHz), two hidden effects.
 
 The record comes from the simulated PEA stage (hyst_sim) with the hidden scenario ``hidden_creep_delay.yaml`` on
-the identification excitation of ``tools/make_hidden_bags.py``. Target: under 60 s on the 2-core machine,
-with every stage shown by the progress display (stderr).
+the identification excitation of ``tools/make_hidden_bags.py``. Target (issue #10): under 10 s on the idle 2-core
+machine — not met (README, "Speed") —, with every stage shown by the progress display (stderr).
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def main() -> str:
         "| record | samples | candidates | named | ladder (validation RMSE) | seconds | target |",
         "|---|---:|---:|---|---|---:|---:|",
         f"| sim PEA, hidden creep+delay, 60 s at 1 kHz | {t.size} | {len(d.candidates)} | {d.missing} | "
-        f"{ladder} | {sec:.1f} | < 60 |",
+        f"{ladder} | {sec:.1f} | < 10 ({'met' if sec < 10 else 'missed'}) |",
     ]
     return "\n".join(rows)
 
