@@ -15,8 +15,8 @@ from .alike import alike_refits
 from .blind import helps, training_only
 from .parallel import pmap
 from .refit import _effect_values, guarded_refit, paired_t, refit, rmse
-from .stages import (Candidate, Rung, Setup, effect_order, effect_variants, own_config, screen_on, variant_label,
-                     variant_suffix)
+from .stages import (Candidate, Rung, Setup, _better_config, effect_order, effect_variants, own_config, screen_on,
+                     variant_label, variant_suffix)
 
 __all__ = ["climb", "prefer_simpler", "training_only", "n_params", "effect_order", "STRONG_SIGNATURE",
            "SIGNATURE_MARGIN", "OTHER_ORDER_TOP"]
@@ -175,9 +175,8 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
                 own.cfg.clear()
                 own.cfg.update(cfg0)
                 alt = refit_in(own, nm, vals2, var2, False)
-                if alt is not None and (out is None or not (out[0] < alt[0] and paired_t(
-                        alt[4][val], out[4][val]) >= s.t_min)):
-                    out = alt  # the simpler, unless the richer validates significantly better
+                if alt is not None and (out is None or _better_config(s, alt[2:], out[2:])):
+                    out = alt  # the simpler, unless the richer validates better by the standard (as on the base)
             return out
 
         def refit_in(own: Setup, nm: str, vals: dict, var: dict, with_screen: bool):
@@ -256,7 +255,7 @@ def _simpler_alike(s: Setup, results: list, best: tuple) -> list[tuple[dict, dic
     9.78 nm with one mode and 9.77 nm with the two in force; refitted with two it stopped at 2.97 nm in a
     basin a second, near-Nyquist "mode" made, while one mode refits to 2.11 nm — the stage itself — and only one
     mode has an inverse the controllers can run. Such a configuration is refitted too and kept unless the richer
-    one validates significantly better (:func:`climb`).
+    one validates better by the standard an effect must meet (:func:`~.stages._better_config`, as on the base).
     """
     nm, var_b = best[1], best[4]
 
