@@ -129,3 +129,17 @@ def test_a_function_of_time_is_taken_on_training_only_before_the_first_validatio
         # an input-dependent effect is judged on the whole training part
         ok, _, _ = training_only(s, [(cur_val, "dynamics", None, None, noise.copy())], cur, cur_val)
         assert ok
+
+
+def test_a_rung_refits_only_simpler_configurations_that_screened_alike():
+    from hyst_model.diagnose.ladder import _simpler_alike
+    s, _ = _setup()
+    two, one = {"dynamics.modes": 2.0}, {"dynamics.modes": 1.0}
+    best = (1.00e-9, "dynamics", {"dynamics.fn": 500.0}, None, two)
+    alike = (1.05e-9, "dynamics", {"dynamics.fn": 480.0}, None, one)
+    assert _simpler_alike(s, [best, alike], best) == [({"dynamics.fn": 480.0}, one)]
+    far = (1.2e-9, "dynamics", {}, None, one)  # screened worse by more than min_factor: not refitted
+    assert _simpler_alike(s, [best, far], best) == []
+    # a richer configuration that screened alike is not (a screen cannot judge it: _rung_variants)
+    best1 = (1.00e-9, "dynamics", {}, None, one)
+    assert _simpler_alike(s, [best1, (1.01e-9, "dynamics", {}, None, two)], best1) == []
