@@ -132,7 +132,7 @@ def test_a_function_of_time_is_taken_on_training_only_before_the_first_validatio
 
 
 def test_a_rung_refits_only_simpler_configurations_that_screened_alike():
-    from hyst_model.diagnose.ladder import _simpler_alike
+    from hyst_model.diagnose.alike import simpler_alike as _simpler_alike
     s, _ = _setup()
     two, one = {"dynamics.modes": 2.0}, {"dynamics.modes": 1.0}
     best = (1.00e-9, "dynamics", {"dynamics.fn": 500.0}, None, two)

@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..effects import compose
 from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
 from .refit import _effect_values, _point, guarded_refit, rmse
 from .stages import Setup, effect_order, own_config, variant_suffix
 
-__all__ = ["alike_refits"]
+__all__ = ["alike_refits", "simpler_alike"]
 
 
 def alike_refits(own: Setup, entry: tuple, cands: dict) -> tuple[Model, np.ndarray, np.ndarray] | None:
@@ -57,3 +58,37 @@ def alike_refits(own: Setup, entry: tuple, cands: dict) -> tuple[Model, np.ndarr
             if best is None or r2 < best[0]:
                 best = (r2, m2, th2, y - yh2)
     return None if best is None else best[1:]
+
+
+def simpler_alike(s: Setup, results: list, best: tuple) -> list[tuple[dict, dict]]:
+    """``(values, configuration)`` of the screens of one effect on a rung — ``(RMSE, name, values, full, var)``
+    each, with the rung held fixed — that validated within ``min_factor`` of the best one's with fewer
+    parameters.
+
+    A screen with the rung held fixed cannot judge a configuration by its parameters
+    (:func:`~.ladder._rung_variants`): on a randomised GMA stage (2210: a 583 Hz mode behind a 6-sample delay)
+    the mode screened on the delay rung at 9.78 nm with one mode and 9.77 nm with the two in force; refitted
+    with two it stopped at 2.97 nm in a basin a second, near-Nyquist "mode" made, while one mode refits to
+    2.11 nm — the stage itself — and only one mode has an inverse the controllers can run. Such a configuration
+    is refitted too (:func:`~.ladder.climb`) and kept unless the richer one validates better by the standard an
+    effect must meet (:func:`~.stages._better_config`, as on the base).
+    """
+    nm, var_b = best[1], best[4]
+
+    def k(var: dict) -> int | None:
+        try:
+            return len(compose(s.base_model, [nm], {**s.cfg, **var}).effects[-1].params())
+        except EffectError:
+            return None
+
+    k_b = k(var_b)
+    if k_b is None:
+        return []
+    out = []
+    for res in results:
+        r, _, vals, _, var = res
+        if res is not best and np.isfinite(r) and r <= s.min_factor * best[0]:
+            kv = k(var)
+            if kv is not None and kv < k_b:
+                out.append((vals, var))
+    return out

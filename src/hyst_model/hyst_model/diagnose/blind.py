@@ -18,7 +18,7 @@ from .refit import paired_t, rmse
 if TYPE_CHECKING:  # stages calls this module on the base's refits
     from .stages import Setup
 
-__all__ = ["training_only", "helps"]
+__all__ = ["training_only", "helps", "beaten_in_training"]
 
 
 def training_only(s: "Setup", trial: list, cur_e: np.ndarray, cur_val: float) -> tuple[list, int, str]:
@@ -71,3 +71,23 @@ def helps(s: "Setup", part: np.ndarray, cur_e: np.ndarray, e: np.ndarray) -> boo
 def _of_time(nm: str) -> bool:
     from ..effects import EFFECTS  # late: the effects import the models the diagnosis fits
     return bool(getattr(EFFECTS.get(nm), "of_time", False))
+
+
+def beaten_in_training(s: Setup, options: list, idx: list[int]) -> set[int]:
+    """Those of the options ``idx`` (which validate alike) that the training part rules out: each trains worse
+    than it validates by ``min_factor`` — the validation blocks miss where it falls short (:func:`training_only`) — and
+    another of them beats it there by the validation test (:func:`helps`). Never all of them: the one
+    that trains best is beaten by none.
+
+    Generated GMA stage 3400173 (a two-mode resonance at 3.6× the noise, steps and sines): the mode and a delay
+    validate alike at the noise floor, the steps' ringing lies in the training part only (delay 15.5 nm there,
+    the mode about half), and parsimony alone took the delay.
+    """
+    tr, val = s.train, s.val
+    out = set()
+    for i in idx:
+        e = options[i][2]
+        if rmse(e[tr]) >= s.min_factor * rmse(e[val]) and any(
+                helps(s, tr, e, options[j][2]) for j in idx if j != i):
+            out.add(i)
+    return out

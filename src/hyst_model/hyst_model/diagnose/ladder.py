@@ -11,8 +11,8 @@ from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
-from .alike import alike_refits
-from .blind import helps, training_only
+from .alike import alike_refits, simpler_alike
+from .blind import beaten_in_training, training_only
 from .parallel import pmap
 from .refit import _effect_values, guarded_refit, paired_t, refit, rmse
 from .stages import (Candidate, Rung, Setup, _better_config, effect_order, effect_variants, own_config, screen_on,
@@ -58,7 +58,7 @@ def prefer_simpler(s: Setup, options: list[tuple[str, float, np.ndarray, float]]
                 alike.append((i, t))
     if len(alike) == 1:
         return best, ""
-    beaten = _beaten_in_training(s, options, [i for i, _ in alike])
+    beaten = beaten_in_training(s, options, [i for i, _ in alike])
     k, r, pick, t = min((n_params(s, options[i][0]), options[i][1], i, t) for i, t in alike if i not in beaten)
     if pick == best:
         return best, ""
@@ -74,26 +74,6 @@ def prefer_simpler(s: Setup, options: list[tuple[str, float, np.ndarray, float]]
         why += (f"; the residual signatures disagree ({nm_b} {sc_b:.2f}, {options[pick][0]} {sc:.2f}): the record "
                 "cannot tell the two apart")
     return pick, why
-
-
-def _beaten_in_training(s: Setup, options: list, idx: list[int]) -> set[int]:
-    """Those of the options ``idx`` (which validate alike) that the training part rules out: each trains worse
-    than it validates by ``min_factor`` — the validation blocks miss where it falls short (:mod:`.blind`) — and
-    another of them beats it there by the validation test (:func:`~.blind.helps`). Never all of them: the one
-    that trains best is beaten by none.
-
-    Generated GMA stage 3400173 (a two-mode resonance at 3.6× the noise, steps and sines): the mode and a delay
-    validate alike at the noise floor, the steps' ringing lies in the training part only (delay 15.5 nm there,
-    the mode about half), and parsimony alone took the delay.
-    """
-    tr, val = s.train, s.val
-    out = set()
-    for i in idx:
-        e = options[i][2]
-        if rmse(e[tr]) >= s.min_factor * rmse(e[val]) and any(
-                helps(s, tr, e, options[j][2]) for j in idx if j != i):
-            out.add(i)
-    return out
 
 
 def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
@@ -153,7 +133,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
                     best_s[res[1]] = res
         trial_s = []
         for r_s, nm, vals, full_s, var in best_s.values():
-            simpler = _simpler_alike(s, all_s[nm], best_s[nm]) if full_s is None else []
+            simpler = simpler_alike(s, all_s[nm], best_s[nm]) if full_s is None else []
             trial_s.append((r_s, nm, vals, var, simpler))
             if full_s is not None:
                 screened[nm] = full_s
@@ -170,7 +150,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
             r_s, nm, vals, var, simpler = item
             cfg0 = dict(own.cfg)
             out = refit_in(own, nm, vals, var, True)
-            # a configuration with fewer parameters that screened alike is refitted too (:func:`_simpler_alike`)
+            # a configuration with fewer parameters that screened alike is refitted too (:func:`~.alike.simpler_alike`)
             for vals2, var2 in simpler:
                 own.cfg.clear()
                 own.cfg.update(cfg0)
@@ -243,39 +223,6 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
 
 def _join(a: str, b: str) -> str:
     return f"{a}; {b}" if a else b
-
-
-def _simpler_alike(s: Setup, results: list, best: tuple) -> list[tuple[dict, dict]]:
-    """``(values, configuration)`` of the screens of one effect on a rung — ``(RMSE, name, values, full, var)``
-    each, with the rung held fixed — that validated within ``min_factor`` of the best one's with fewer
-    parameters.
-
-    A screen with the rung held fixed cannot judge a configuration by its parameters (:func:`_rung_variants`): on
-    a randomised GMA stage (2210: a 583 Hz mode behind a 6-sample delay) the mode screened on the delay rung at
-    9.78 nm with one mode and 9.77 nm with the two in force; refitted with two it stopped at 2.97 nm in a
-    basin a second, near-Nyquist "mode" made, while one mode refits to 2.11 nm — the stage itself — and only one
-    mode has an inverse the controllers can run. Such a configuration is refitted too and kept unless the richer
-    one validates better by the standard an effect must meet (:func:`~.stages._better_config`, as on the base).
-    """
-    nm, var_b = best[1], best[4]
-
-    def k(var: dict) -> int | None:
-        try:
-            return len(compose(s.base_model, [nm], {**s.cfg, **var}).effects[-1].params())
-        except EffectError:
-            return None
-
-    k_b = k(var_b)
-    if k_b is None:
-        return []
-    out = []
-    for res in results:
-        r, _, vals, _, var = res
-        if res is not best and np.isfinite(r) and r <= s.min_factor * best[0]:
-            kv = k(var)
-            if kv is not None and kv < k_b:
-                out.append((vals, var))
-    return out
 
 
 def _rung_variants(s: Setup, nm: str) -> list[dict]:
