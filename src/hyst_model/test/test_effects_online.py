@@ -126,74 +126,45 @@ def test_drift_observer_estimates_the_offset_from_the_sensor():
     assert obs.offset == before
 
 
-@pytest.mark.parametrize("fn,zeta,part,lag", [(350.0, 0.04, 1.0, 0.0), (800.0, 0.1, 1.0, 0.0),
-                                              (150.0, 0.5, 1.0, 0.0), (350.0, 0.04, 0.4, 0.0),
-                                              (150.0, 0.02, 0.9, 0.0), (300.0, 0.05, 0.3, 0.5)])
-def test_series_resonance_inverse_and_predictor_are_exact_on_the_model(fn, zeta, part, lag):
+@pytest.mark.parametrize("theta", [[350.0, 0.04, 1.0, 0.0], [800.0, 0.1, 1.0, 0.0], [150.0, 0.5, 1.0, 0.0],
+                                   [350.0, 0.04, 0.4, 0.0], [150.0, 0.02, 0.9, 0.0], [300.0, 0.05, 0.3, 0.5],
+                                   [120.0, 0.3, 0.5, 0.0, 400.0, 0.3], [100.0, 0.05, 0.2, 0.0, 180.0, 0.05]])
+def test_series_resonance_inverse_and_predictor_are_exact_on_the_model(theta):
     """target() inverts the ZOH resonance exactly (filtering the targets gives the reference back), and with the
     base model exact the measurement is the base output itself — also for a mode only part of the motion
-    passes (participation < 1) and for a sensor that samples into the hold (lag > 0)."""
-    from hyst_model.effects.dynamics import series_filter
+    passes (participation < 1), for a sensor that samples into the hold (lag > 0), and for two modes in cascade
+    behind one hold (``dynamics.modes: 2``, the four-state system) whose sampled zeros lie inside the unit
+    circle."""
+    from hyst_model.effects.dynamics import SeriesResonanceInverse, series_filter
 
     t, u, _ = _record(3000)
     m = pea_default()
     st = MBWStepper(m)  # the base output from rest, as the predictor runs it
     st.reset(float(u[0]))
     x = np.array([st.step(float(v)) for v in u])
-    eff = EFFECTS["dynamics"](CFG)
-    inv = eff.online(np.array([fn, zeta, part, lag]), base=lambda: MBWStepper(m))
+    th = np.array(theta)
+    fn, zeta, part, lag = theta[:4]
+    second = (theta[4], theta[5]) if len(theta) == 6 else None
+    eff = EFFECTS["dynamics"]({**CFG, "dynamics.modes": 2 if second else 1})
 
     def reading(xx):  # the stage's reading under the base output xx
-        return xx + part * (series_filter(xx, fn, zeta, DT, "zoh", lag) - xx)
+        return xx + part * (series_filter(xx, fn, zeta, DT, "zoh", lag, second) - xx)
     y = reading(x)
     assert np.max(np.abs(y - x)) > 1e-8
+    np.testing.assert_allclose(y, eff.output(th, t, u, x), rtol=0, atol=1e-15)
+    inv = eff.online(th, base=lambda: MBWStepper(m))
+    assert isinstance(inv, SeriesResonanceInverse), eff.online_note
     inv.reset(float(y[0]), float(u[0]))
     xr = np.array([inv.measure(float(a), float(b)) for a, b in zip(y, u)])
     assert np.max(np.abs(xr - x)) < 1e-15 + 1e-9 * float(np.max(np.abs(x)))
     # feedforward: a smooth reference through the inverse, then through the resonance, is the reference
-    r = x + 1e-7 * np.sin(2 * np.pi * 7 * t)
-    inv2 = eff.online(np.array([fn, zeta, part, lag]), base=lambda: MBWStepper(m))
-    inv2.reset(float(r[0]), float(u[0]))
-    xt = []
-    for k in range(r.size):
-        xt.append(inv2.target(float(r[k]), float(u[k])))
-        inv2._s = inv2._A @ inv2._s + inv2._B * xt[-1]  # the stage achieved the target
-    assert np.max(np.abs(reading(np.array(xt))[1:] - r[1:])) < 1e-12
-
-
-@pytest.mark.parametrize("theta", [[120.0, 0.3, 0.5, 0.0, 400.0, 0.3], [100.0, 0.05, 0.2, 0.0, 180.0, 0.05]])
-def test_two_modes_in_cascade_are_inverted_exactly_on_the_model(theta):
-    """Two modes in cascade behind one hold (``dynamics.modes: 2``) whose sampled zeros lie inside the unit
-    circle: the same inverse and predictor on the four-state system — the targets through the cascade give the
-    reference back, and the predictor's measurement is the base output."""
-    from hyst_model.effects.dynamics import SeriesResonanceInverse, series_filter
-
-    t, u, _ = _record(3000)
-    m = pea_default()
-    st = MBWStepper(m)
-    st.reset(float(u[0]))
-    x = np.array([st.step(float(v)) for v in u])
-    eff = EFFECTS["dynamics"]({**CFG, "dynamics.modes": 2})
-    th = np.array(theta)
-    fn, zeta, part, lag, fn2, zeta2 = theta
-
-    def reading(xx):
-        return xx + part * (series_filter(xx, fn, zeta, DT, "zoh", lag, (fn2, zeta2)) - xx)
-    assert np.allclose(reading(x), eff.output(th, t, u, x), rtol=0, atol=1e-15)
-    inv = eff.online(th, base=lambda: MBWStepper(m))
-    assert isinstance(inv, SeriesResonanceInverse), eff.online_note
-    y = reading(x)
-    assert np.max(np.abs(y - x)) > 1e-8
-    inv.reset(float(y[0]), float(u[0]))
-    xr = np.array([inv.measure(float(a), float(b)) for a, b in zip(y, u)])
-    assert np.max(np.abs(xr - x)) < 1e-15 + 1e-9 * float(np.max(np.abs(x)))
     r = x + 1e-7 * np.sin(2 * np.pi * 7 * t)
     inv2 = eff.online(th, base=lambda: MBWStepper(m))
     inv2.reset(float(r[0]), float(u[0]))
     xt = []
     for k in range(r.size):
         xt.append(inv2.target(float(r[k]), float(u[k])))
-        inv2._s = inv2._A @ inv2._s + inv2._B * xt[-1]
+        inv2._s = inv2._A @ inv2._s + inv2._B * xt[-1]  # the stage achieved the target
     assert np.max(np.abs(reading(np.array(xt))[1:] - r[1:])) < 1e-12
 
 
