@@ -15,16 +15,11 @@ from .alike import alike_refits, simpler_alike
 from .blind import beaten_in_training, training_only
 from .parallel import pmap
 from .refit import _effect_values, guarded_refit, paired_t, refit, rmse
-from .stages import (Candidate, Rung, Setup, _better_config, effect_order, effect_variants, own_config, screen_on,
-                     variant_label, variant_suffix)
+from .stages import (Candidate, Rung, Setup, _better_config, effect_order, effect_variants, n_params, own_config,
+                     screen_on, variant_label, variant_suffix)
 
 __all__ = ["climb", "prefer_simpler", "training_only", "n_params", "effect_order", "STRONG_SIGNATURE",
            "SIGNATURE_MARGIN", "OTHER_ORDER_TOP"]
-
-
-def n_params(s: Setup, nm: str) -> int:
-    """Free parameters effect ``nm`` adds (in its configuration on ``s.cfg``)."""
-    return len(compose(s.base_model, [nm], s.cfg).effects[-1].params())
 
 
 #: A residual signature at least this strong earns a candidate a joint refit at a rung even when its screen does not.
@@ -59,7 +54,8 @@ def prefer_simpler(s: Setup, options: list[tuple[str, float, np.ndarray, float]]
     if len(alike) == 1:
         return best, ""
     beaten = beaten_in_training(s, options, [i for i, _ in alike])
-    k, r, pick, t = min((n_params(s, options[i][0]), options[i][1], i, t) for i, t in alike if i not in beaten)
+    ks = {i: n_params(s, options[i][0]) for i, _ in alike}  # every option was fitted, so each composes
+    k, r, pick, t = min((ks[i] or 0, options[i][1], i, t) for i, t in alike if i not in beaten)
     if pick == best:
         return best, ""
     sc = options[pick][3]
@@ -68,7 +64,7 @@ def prefer_simpler(s: Setup, options: list[tuple[str, float, np.ndarray, float]]
                f"{s.t_min:g}), but the validation blocks do not reach where they differ — on the training part "
                f"{nm_b} leaves {fmt_len(rmse(e_b[s.train]))} and it {fmt_len(rmse(options[pick][2][s.train]))}")
         return pick, why
-    why = (f"taken before {nm_b} ({fmt_len(r_b)} on validation, {n_params(s, nm_b)} parameters): they validate "
+    why = (f"taken before {nm_b} ({fmt_len(r_b)} on validation, {ks[best]} parameters): they validate "
            f"alike (paired t {t:.1f} < {s.t_min:g}) and it has fewer parameters ({k})")
     if sc_b > sc + SIGNATURE_MARGIN:
         why += (f"; the residual signatures disagree ({nm_b} {sc_b:.2f}, {options[pick][0]} {sc:.2f}): the record "
@@ -192,7 +188,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
         _other_order(s, trial, prev_m, cur_val)
         _fresh_start(s, trial, cur_val)
         # and with a carried effect in a configuration the base could not tell from the one kept (:mod:`.alike`)
-        _retry_best(s, trial, cur_val, lambda own, i: alike_refits(own, trial[i], cands))
+        _retry_best(s, trial, cur_val, lambda own, i: alike_refits(own, trial[i], cands), ALIKE_TOP)
         good = [x for x in trial if cur_val / x[0] >= s.min_factor and paired_t(cur_e[val], x[4][val]) >= s.t_min]
         pick, why = prefer_simpler(s, [(x[1], x[0], x[4], cands[x[1]].score) for x in good]) if good else (-1, "")
         if not good:  # none validated: one the hold-out cannot see may still be needed where training looks
@@ -209,7 +205,7 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
             now = own_config(mm, x)  # .alike), for the rungs and the prune after
             if x != nm and x in cands and any(s.cfg.get(k) != v for k, v in now.items()):
                 cands[x].note = _join(cands[x].note, f"with {nm} on top it was refitted in {variant_label(now)} "
-                                      "(the base alone could not tell the two apart)")
+                                      "(on the base alone the choice between the two was not settled)")
             s.cfg.update(now)
         c = cands[nm]
         c.note = why
@@ -233,10 +229,7 @@ def _rung_variants(s: Setup, nm: str) -> list[dict]:
     against the base, which a screen on the rung held fixed cannot judge (it preferred two modes on top of creep
     where one refitted 25 % better), and each rung model with them costs 4x the fit time."""
     out = []
-    try:
-        k_now = len(compose(s.base_model, [nm], s.cfg).effects[-1].params())
-    except EffectError:
-        k_now = None
+    k_now = n_params(s, nm)
     for v in effect_variants(s, nm):
         if v and not all(s.cfg.get(k) == x for k, x in v.items()):
             try:
@@ -276,6 +269,9 @@ def _value_starts(s: Setup, order: list, nm: str, screened: dict, own: dict | No
 
 #: How many of a rung's best refits are also tried with the new effect innermost (:func:`_other_order`).
 OTHER_ORDER_TOP = 2
+
+#: The best refits of a rung tried with a carried effect in another configuration (:func:`~.alike.alike_refits`).
+ALIKE_TOP = 3
 
 
 def _other_order(s: Setup, trial: list, prev_m: Model, cur_val: float) -> None:
@@ -359,12 +355,12 @@ def _fresh_start(s: Setup, trial: list, cur_val: float) -> None:
     _retry_best(s, trial, cur_val, fresh)
 
 
-def _retry_best(s: Setup, trial: list, cur_val: float, again) -> None:
+def _retry_best(s: Setup, trial: list, cur_val: float, again, top: int = OTHER_ORDER_TOP) -> None:
     """Fit the :data:`OTHER_ORDER_TOP` best entries of ``trial`` that improve on the rung (validation RMSE below
     ``cur_val``) once more with ``again(own, index) -> (model, θ, residual) | None``, side by side; an entry is
     replaced where the new fit validates better (never worse)."""
     val = s.val
-    best = [k for k in sorted(range(len(trial)), key=lambda k: trial[k][0])[:OTHER_ORDER_TOP]
+    best = [k for k in sorted(range(len(trial)), key=lambda k: trial[k][0])[:top]
             if trial[k][0] < cur_val]
     for i, res in zip(best, pmap(s, again, best)):
         if res is not None and rmse(res[2][val]) < trial[i][0]:

@@ -23,7 +23,7 @@ from .blind import training_only
 from .parallel import pmap
 from .unexplained import Unexplained, explain_unexplained
 
-__all__ = ["Candidate", "Rung", "Setup", "screen_on", "screen_all", "refit_all", "rebase", "verdict",
+__all__ = ["Candidate", "Rung", "Setup", "screen_on", "n_params", "screen_all", "refit_all", "rebase", "verdict",
            "effect_order", "effect_variants", "own_config", "refit_from_final", "validate_alike", "variant_label",
            "variant_suffix"]
 
@@ -67,8 +67,10 @@ class Candidate:
     #: refitted jointly too (:func:`refit_all`). Not reported.
     runner_up: tuple | None = None
     #: ``(variant, values)`` of each configuration whose screen validated within ``min_factor`` of the best
-    #: one's, the kept one included, with the base and effect values it reached: the record could not choose
-    #: between them on the base, so the ladder refits its rungs in the others too (:mod:`.alike`). Not reported.
+    #: one's, or whose squared error exceeds the best one's by less than the best leaves above the noise floor
+    #: (another effect still in the residual can tip the choice), the kept one included, with the base and effect
+    #: values it reached: the record could not settle between them on the base, so the ladder refits its rungs
+    #: in the others too (:mod:`.alike`). Not reported.
     alike: list = field(default_factory=list)
 
 
@@ -243,6 +245,15 @@ def effect_variants(s: Setup, nm: str) -> list[dict]:
     return [v for v in variants if not any(k in s.fixed and s.fixed[k] != x for k, x in v.items())] or [{}]
 
 
+def n_params(s: Setup, nm: str, var: dict | None = None) -> int | None:
+    """Free parameters effect ``nm`` adds in its configuration on ``s.cfg`` (with ``var`` over it); ``None`` where
+    that configuration cannot be composed."""
+    try:
+        return len(compose(s.base_model, [nm], {**s.cfg, **(var or {})}).effects[-1].params())
+    except EffectError:
+        return None
+
+
 def effect_order(m: Model) -> list[str]:
     """The effects of ``m`` in the order it applies them (innermost first); none for a bare base model."""
     return [e.name for e in m.effects] if isinstance(m, ComposedModel) else []
@@ -301,7 +312,9 @@ def _screened(s: Setup, nm: str, results: list[dict]) -> tuple[Candidate, dict |
     if tried:
         tried.sort(key=lambda x: x[0])
         r, var, vals, done = tried[0]
-        close = [x for x in tried if np.isfinite(x[0]) and x[0] < s.min_factor * r]
+        # what the best leaves above the floor may hold another effect, which can tip the choice either way
+        excess = r * r - (s.noise_margin * s.noise) ** 2
+        close = [x for x in tried if np.isfinite(x[0]) and (x[0] < s.min_factor * r or x[0] ** 2 - r * r < excess)]
         alike = [(vv, _values_at(s, vl, dn)) for _, vv, vl, dn in close] if len(close) > 1 else []
         if len(tried) > 1 and done is None and tried[1][3] is None and np.isfinite(tried[1][0]):
             runner_up = (tried[1][2], tried[1][1])
