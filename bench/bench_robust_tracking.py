@@ -67,6 +67,13 @@ def track(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=N
     """RMSE (m) of ``alg`` with the model and compensation of ``spec`` tracking ``ref`` (spec string or
     Reference) on a fresh stage of ``scenario`` (name or ``seed -> plant``); NaN if the loop diverged, or if the
     node would refuse the model (it runs away within the command limits where the law runs it open loop)."""
+    return track_both(spec, scenario, alg, ref, seconds, seed, limits)[0]
+
+
+def track_both(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=None) -> tuple[float, float]:
+    """As :func:`track`: the RMSE of the sensor's reading and of the stage's true position (m, both NaN where
+    :func:`track` gives NaN). They differ where the sensor has effects of its own (its offset drift: a feedback law
+    follows it, the open loop does not)."""
     from hyst_control.compensation import from_params
     from hyst_control.errors import ControlError
     from hyst_bringup.loop import run_closed_loop
@@ -93,22 +100,24 @@ def track(spec, scenario, alg: str, ref, seconds: float, seed: int = 5, limits=N
     try:
         model_divergence(alg, model, comp, limits if limits is not None else PEA_LIMITS, 1.0 / RATE)
     except ControlError:
-        return float("nan")
+        return float("nan"), float("nan")
     # as the node runs it: the command watched, the law derated if it rings on a mode the model does not know
     c = make_supervised(alg, model, 1.0 / RATE, limits=limits, gains=gains, compensation=comp)
     try:
         plant = _plant(scenario, seed) if isinstance(scenario, str) else scenario(seed)
         r = run_closed_loop(c, ref, seconds, plant=plant, settle=0.5)
     except ControlError:
-        return float("nan")
+        return float("nan"), float("nan")
     if not r.finite:
-        return float("nan")
+        return float("nan"), float("nan")
     e = r.y - r.r
+    ex = r.x - r.r if r.x is not None else np.full_like(e, np.nan)
     shape = ref if isinstance(ref, str) else ref.shape
     if shape == "step":  # as bench_tracking and the thesis: the 50 ms after the step are left out
         t0 = parse_reference(ref).t0 if isinstance(ref, str) else ref.t0
-        e = e[~((r.t >= t0) & (r.t < t0 + 0.05))]
-    return float(np.sqrt(np.mean(e ** 2)))
+        keep = ~((r.t >= t0) & (r.t < t0 + 0.05))
+        e, ex = e[keep], ex[keep]
+    return float(np.sqrt(np.mean(e ** 2))), float(np.sqrt(np.mean(ex ** 2)))
 
 
 def main(argv: list[str] | None = None) -> str:

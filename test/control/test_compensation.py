@@ -115,6 +115,19 @@ def test_drift_observer_is_not_fed_in_open_loop():
     assert comp.rmse == pytest.approx(plain.rmse, rel=1e-9)
 
 
+def test_a_sensor_drift_is_in_the_reading_not_in_the_stage_position():
+    """The sim's drift is its sensor's offset: the open loop's reading carries it while the stage goes where it
+    was sent; a feedback law follows the reading, so the drift moves the stage instead."""
+    plant = {"drift": 2e-7}
+    clean = _track("open_loop", {}, None, seconds=3.0)
+    ol = _track("open_loop", plant, None, seconds=3.0)
+    fb = _track("dppc", plant, _plan(["drift"]), seconds=3.0)
+    assert clean.x is not None and ol.x is not None and fb.x is not None
+    assert ol.rmse > 5 * clean.rmse, (ol.rmse, clean.rmse)  # the reading drifts away
+    assert ol.rmse_position < 1.5 * clean.rmse_position + 1e-9, (ol.rmse_position, clean.rmse_position)
+    assert fb.rmse < 0.2 * ol.rmse and fb.rmse_position > 5 * fb.rmse, (fb.rmse, fb.rmse_position)
+
+
 def test_declared_configuration_defaults_mean_what_a_file_without_the_key_means():
     """A node declares every effect key with a default; a params file that lacks one must read as the effect does
     without it (a quadratic asymmetry file was read as a kink of zero slope: the asymmetry went uncompensated)."""

@@ -44,6 +44,11 @@ class SimPlant:
     def step(self, u: float) -> float:
         return self.plant.step(u).y
 
+    @property
+    def position(self) -> float:
+        """True stage position at the last sample (m), before sensor effects: for evaluation only."""
+        return self.plant.position
+
 
 def default_plant(rate: float = 2000.0, seed: int = 0, **strengths: float) -> SimPlant:
     """The embedded default stage (:meth:`hyst_sim.plant.Plant.default`: pea_default, 0–150 V, 2 nm noise and
@@ -68,6 +73,9 @@ class LoopResult:
 
     #: Seconds after t = 0 excluded from the metrics (set by :func:`run_closed_loop` ``skip``).
     skip: float = 0.0
+    #: True stage position per sample (m) where the plant reports one (a simulation): what the stage did, as
+    #: against what its sensor read (a sensor's own drift is in ``y`` only).
+    x: np.ndarray | None = None
 
     @property
     def error(self) -> np.ndarray:
@@ -78,6 +86,14 @@ class LoopResult:
     @property
     def rmse(self) -> float:
         return float(np.sqrt(np.mean(self.error ** 2)))
+
+    @property
+    def rmse_position(self) -> float:
+        """RMSE of the true position against the reference (m) inside the metric window; NaN without ``x``."""
+        if self.x is None:
+            return math.nan
+        keep = self.t >= self.skip
+        return float(np.sqrt(np.mean((self.x - self.r)[keep] ** 2)))
 
     @property
     def mae(self) -> float:
@@ -137,6 +153,7 @@ def run_closed_loop(controller: BaseController, reference: Reference | str, seco
     y = np.empty(n)
     u = np.empty(n)
     rec = {k: np.empty(n) for k in record}
+    x = np.empty(n) if hasattr(plant, "position") else None
     u_cmd = controller.limits.v_safe
     y_meas = plant.reset(u_cmd)
     controller.reset(y_meas, u_cmd, float(r[0]))
@@ -153,6 +170,8 @@ def run_closed_loop(controller: BaseController, reference: Reference | str, seco
         y_meas = plant.step(u_cmd)
         y[k] = y_meas
         u[k] = u_cmd
+        if x is not None:
+            x[k] = plant.position
         if record:
             s = controller.state()
             for name in record:
@@ -160,7 +179,7 @@ def run_closed_loop(controller: BaseController, reference: Reference | str, seco
     if not np.all(np.isfinite(y)):
         raise LoopError("the plant output became non-finite")
     spec = reference if isinstance(reference, str) else ref.shape
-    return LoopResult(controller.name, spec, 1.0 / dt, t, r, y, u, rec, skip)
+    return LoopResult(controller.name, spec, 1.0 / dt, t, r, y, u, rec, skip, x)
 
 
 def warm_up(algorithms: Sequence[str], rate: float = 2000.0) -> float:
