@@ -9,8 +9,9 @@ diagnosis's base MBW and with its final (extended) model, on a fresh stage (othe
 case's effect-free twin (same truth, same noise) gives the "no-effect level" the issue's criteria compare with:
 DPPC and DMRAC with the extended model within 2× of it on sines up to 30 Hz, feedforward within 3×.
 Errors are the sensor's reading against the reference, as a user measures them; the last column gives the
-feedforward's error on the stage's true position too (a simulation knows it): the sim's drift is the sensor's
-offset drifting, which no open-loop law can see, and which leaves the stage itself where it was sent.
+feedforward's error on the stage's true position too (a simulation knows it), against the same no-effect level:
+the sim's drift is the sensor's offset drifting, which no open-loop law can see, and which leaves the stage
+itself where it was sent.
 
 References sit mid-stroke with 20 % of the effect-free stage's static travel as amplitude (about 15 ± 6 µm on a
 PEA, 0 ± 8 µm on a GMA), so every case asks only what its stage can reach within a few ms.
@@ -141,8 +142,9 @@ def verdicts(r: dict) -> dict:
         ratios = [r["stage", "ext", alg, f] / r["twin", "ext", alg, f] for f in SINES]
         v[alg] = max(ratios) if all(np.isfinite(ratios)) else float("inf")
         v[alg + "_better"] = all(r["stage", "ext", alg, f] <= 1.05 * r["stage", "base", alg, f] for f in SINES)
-    # the same on the stage's true position (a simulation knows it): a sensor's own drift is no stage error
-    ratios = [r["stage", "ext", "open_loop", f, "x"] / r["twin", "ext", "open_loop", f, "x"] for f in SINES]
+    # where the stage itself went (a simulation knows it; a sensor's own drift is no stage error), against the same
+    # no-effect level (the twin's reading: its true position is noise-free, a ratio to it would measure nothing)
+    ratios = [r["stage", "ext", "open_loop", f, "x"] / r["twin", "ext", "open_loop", f] for f in SINES]
     v["open_loop_x"] = max(ratios) if all(np.isfinite(ratios)) else float("inf")
     return v
 
