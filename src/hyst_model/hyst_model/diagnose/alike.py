@@ -32,7 +32,8 @@ __all__ = ["alike_refits", "simpler_alike"]
 def alike_refits(own: Setup, entry: tuple, cands: dict) -> tuple[Model, np.ndarray, np.ndarray] | None:
     """The best refit of a rung's refit ``entry`` (validation RMSE, new effect, model, θ, residual) with one
     carried effect in another configuration of its :attr:`~.stages.Candidate.alike`: from that configuration's
-    own values (base and effect), the other carried effects' and the new effect's values from ``entry``.
+    own values (base and effect), the other carried effects' and the new effect's values from ``entry``; and from
+    the bare base, every effect from its own data start.
     ``None`` when no carried effect has another alike configuration or every such refit failed."""
     t, u, y, val = own.t, own.u, own.y, own.val
     _, new, mm, tth, _ = entry
@@ -53,20 +54,21 @@ def alike_refits(own: Setup, entry: tuple, cands: dict) -> tuple[Model, np.ndarr
             mine = {k: v for k, v in start.items() if k.startswith(x + ".")}
             carry = {**{k: v for k, v in vals.items() if not k.startswith(x + ".")}, **mine}
             base_vals = {k: v for k, v in start.items() if "." not in k}
-            fits = []
+            fits: list[tuple] = []
             try:
-                fits.append(guarded_refit(own.base_model, names, own.cfg, t, u, y, val, {**base_vals, **carry},
-                                          theta_base=_point(own.base_model, base_vals), carry=carry,
-                                          fitter=own.fit))
+                fits.append(("its own fit", *guarded_refit(
+                    own.base_model, names, own.cfg, t, u, y, val, {**base_vals, **carry},
+                    theta_base=_point(own.base_model, base_vals), carry=carry, fitter=own.fit)))
             except (EffectError, FitError):
                 pass
             try:  # and from the bare base, every effect from its own data start (the route that found 3600018)
-                fits.append(refit(own.base_model, names, own.cfg, t, u, y, own.th_base, fitter=own.fit))
+                fits.append(("the base", *refit(own.base_model, names, own.cfg, t, u, y, own.th_base,
+                                                fitter=own.fit)))
             except (EffectError, FitError):
                 pass
-            for m2, th2, yh2 in fits:
+            for route, m2, th2, yh2 in fits:
                 r2 = rmse((y - yh2)[val])
-                own.say(f"refit {m2.name}{variant_suffix(var)} from its own fit: validation RMSE {fmt_len(r2)}")
+                own.say(f"refit {m2.name}{variant_suffix(var)} from {route}: validation RMSE {fmt_len(r2)}")
                 if best is None or r2 < best[0]:
                     best = (r2, m2, th2, y - yh2)
     return None if best is None else best[1:]
