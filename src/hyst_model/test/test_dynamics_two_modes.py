@@ -108,7 +108,7 @@ def test_the_runner_up_configuration_is_kept_for_a_joint_refit():
     """Screens with the base held fixed rank configurations; the second best is handed on to be refitted too,
     unless its screen already was a joint refit or failed."""
     class S:  # the parts of Setup _screened reads
-        base, base_val, min_factor = "mbw", 3.0, 1.1
+        base, base_val, min_factor, noise_margin, noise = "mbw", 3.0, 1.1, 1.1, 0.5
 
         @staticmethod
         def say(*a, **k):
@@ -127,8 +127,9 @@ def test_the_runner_up_configuration_is_kept_for_a_joint_refit():
 
 
 def test_configurations_that_screen_alike_are_kept_with_their_values():
-    """Configurations within min_factor of the best are handed on with the base and effect values each reached
-    (the ladder refits later rungs in them: diagnose.alike); the kept one is among them."""
+    """Configurations within min_factor of the best — or, while the best leaves error above the noise floor,
+    within what it leaves there — are handed on with the base and effect values each reached (the ladder refits
+    later rungs in them: diagnose.alike); the kept one is among them."""
     class Base:
         @staticmethod
         def unpack(th):
@@ -136,6 +137,7 @@ def test_configurations_that_screen_alike_are_kept_with_their_values():
 
     class S:
         base, base_val, min_factor, base_model, th_base = "mbw", 3.0, 1.1, Base, (0.3,)
+        noise_margin, noise = 1.1, 1.0 / 1.1  # the best (1.0) at the noise floor: nothing left to tip the choice
 
         @staticmethod
         def say(*a, **k):
@@ -150,3 +152,9 @@ def test_configurations_that_screen_alike_are_kept_with_their_values():
     assert cand.alike == [(lags, {"zeta1": 0.3, "creep.gain": 0.1}), (log, {"zeta1": 0.25, "creep.gain": 0.06})]
     res[0]["r"] = 1.2  # no longer within 1.1x: the record chose
     assert _screened(S, "creep", res)[0].alike == []
+
+    class Above(S):  # the best 10x above the floor: another effect may explain 1.2² − 1.0² of it
+        noise = 0.1
+    assert [v for v, _ in _screened(Above, "creep", res)[0].alike] == [lags, log]
+    res[0]["r"] = 1.5  # 1.5² − 1.0² exceeds all the best leaves above the floor (1.0² − 0.11²)
+    assert _screened(Above, "creep", res)[0].alike == []
