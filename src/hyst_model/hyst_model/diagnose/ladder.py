@@ -54,8 +54,13 @@ def prefer_simpler(s: Setup, options: list[tuple[str, float, np.ndarray, float]]
     if len(alike) == 1:
         return best, ""
     beaten = beaten_in_training(s, options, [i for i, _ in alike])
-    ks = {i: n_params(s, options[i][0]) for i, _ in alike}  # every option was fitted, so each composes
-    k, r, pick, t = min((ks[i] or 0, options[i][1], i, t) for i, t in alike if i not in beaten)
+    ks: dict[int, int] = {}
+    for i, _ in alike:
+        k_i = n_params(s, options[i][0])
+        if k_i is None:  # every option was fitted, so each composes; never counted as parameter-free
+            raise EffectError(f"{options[i][0]} does not compose on {s.base} in the configuration it was fitted in")
+        ks[i] = k_i
+    k, r, pick, t = min((ks[i], options[i][1], i, t) for i, t in alike if i not in beaten)
     if pick == best:
         return best, ""
     sc = options[pick][3]
