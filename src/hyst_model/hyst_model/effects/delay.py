@@ -13,6 +13,7 @@ from ..errors import EffectError
 from ..model import Param
 from .base import Effect
 from .online import OnlineEffect
+from .shift import shift, shift_columns
 from .signals import corr, rate_of
 
 __all__ = ["Delay", "DelayPredictor"]
@@ -70,13 +71,18 @@ class Delay(Effect):
         tau = float(theta[0])
         if tau <= 0.0:
             return u
-        return np.interp(t - tau, t, u, left=u[0])
+        return shift(t, tau, u)
 
     def output(self, theta, t, u, y):
         tau = float(theta[0])
         if tau <= 0.0:
             return y
-        return np.interp(t - tau, t, y, left=y[0])
+        return shift(t, tau, y)
+
+    def push(self, theta, t, u, x, y, J):
+        """Columns ``J`` of d x / d p delayed as the output is (the operator is linear): d y / d p."""
+        tau = float(theta[0])
+        return J if tau <= 0.0 else shift_columns(t, tau, J)
 
     def undo_output(self, theta, t, u, y):
         """Output side: the record advanced by τ (its last value held), the displacement before the delay."""
@@ -85,7 +91,7 @@ class Delay(Effect):
             return None
         if tau <= 0.0:
             return y
-        return np.interp(t + tau, t, y, right=y[-1])
+        return shift(t, -tau, y)
 
     def online(self, theta, base=None):
         tau = float(theta[0])
