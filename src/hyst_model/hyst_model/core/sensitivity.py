@@ -154,8 +154,9 @@ def mbw_normal_equations(p: np.ndarray, un: np.ndarray, y0: float, S0: np.ndarra
         jrow[m] = inv_scale
         for i in range(p_all):
             g[i] += jrow[i] * r
-            for j in range(i, p_all):
-                H[i, j] += jrow[i] * jrow[j]
+            Hi = H[i]
+            for j in range(p_all):  # the full row (vectorises); j < i is overwritten below, j ≥ i sums as before
+                Hi[j] += jrow[i] * jrow[j]
     for i in range(p_all):
         for j in range(i):
             H[i, j] = H[j, i]
