@@ -77,11 +77,14 @@ class LoopResult:
     #: against what its sensor read (a sensor's own drift is in ``y`` only).
     x: np.ndarray | None = None
 
+    def _in_window(self, a: np.ndarray) -> np.ndarray:
+        """The samples of ``a`` inside the metric window (t ≥ ``skip``)."""
+        return a[self.t >= self.skip]
+
     @property
     def error(self) -> np.ndarray:
         """Tracking error y − r (m) inside the metric window."""
-        keep = self.t >= self.skip
-        return (self.y - self.r)[keep]
+        return self._in_window(self.y - self.r)
 
     @property
     def rmse(self) -> float:
@@ -92,8 +95,7 @@ class LoopResult:
         """RMSE of the true position against the reference (m) inside the metric window; NaN without ``x``."""
         if self.x is None:
             return math.nan
-        keep = self.t >= self.skip
-        return float(np.sqrt(np.mean((self.x - self.r)[keep] ** 2)))
+        return float(np.sqrt(np.mean(self._in_window(self.x - self.r) ** 2)))
 
     @property
     def mae(self) -> float:
