@@ -143,3 +143,20 @@ def test_a_rung_refits_only_simpler_configurations_that_screened_alike():
     # a richer configuration that screened alike is not (a screen cannot judge it: _rung_variants)
     best1 = (1.00e-9, "dynamics", {}, None, one)
     assert _simpler_alike(s, [best1, (1.01e-9, "dynamics", {}, None, two)], best1) == []
+
+
+def test_the_final_models_effects_after_the_first_rank_by_what_each_adds():
+    from hyst_model.diagnose.stages import Candidate, final_order
+
+    def cand(nm, without):
+        return Candidate(nm, 1e-9, 1e-9, 1.0, True, 0.0, "", rmse_without=without)
+
+    cands = {"creep": cand("creep", 17.5e-9), "delay": cand("delay", 2.62e-9), "dynamics": cand("dynamics", 4.37e-9)}
+    assert final_order(["creep", "delay", "dynamics"], cands) == ["creep", "dynamics", "delay"]
+    # the first stays first even where dropping another costs more: it explains most of the error on its own
+    cands["creep"].rmse_without = 1e-9
+    assert final_order(["creep", "delay", "dynamics"], cands)[0] == "creep"
+    # untested (the backward step did not run on every one of them): the ladder's order stands
+    cands["delay"].rmse_without = None
+    assert final_order(["creep", "delay", "dynamics"], cands) == ["creep", "delay", "dynamics"]
+    assert final_order(["creep", "delay"], cands) == ["creep", "delay"]

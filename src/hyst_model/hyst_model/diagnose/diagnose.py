@@ -82,6 +82,7 @@ class Diagnosis:
             "noise_floor": self.noise,
             "candidates": [{"effect": c.effect, "rmse": c.rmse, "improvement": c.improvement,
                             "significant": c.significant, "score": c.score, "t_stat": c.t_stat,
+                            "rmse_without": c.rmse_without,
                             "on_top_of": c.on_top_of,
                             "evidence": c.evidence,
                             "params": c.params} for c in self.candidates],

@@ -37,6 +37,8 @@ def prune(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], c
     A dropped effect's candidate gets ``significant = False`` and a note saying why; a final rung with the kept
     effects is appended to ``ladder`` (its model to ``models``), so the ladder shows the path and the answer.
     """
+    for c in cands.values():  # set anew by the last round below, on the final model only
+        c.rmse_without = None
     if len(chosen) < 2:
         return chosen
     t, u, y, val, train = s.t, s.u, s.y, s.val, s.train
@@ -64,8 +66,11 @@ def prune(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], c
                     f"{fmt_len(rmse(e[train]))} against {fmt_len(rmse(e_full[train]))}", step=False)
             return r, nm, mm, th, e, t_stat
 
-        trials = [x for x in pmap(s, without, kept) if x is not None
-                  and r_full > 0 and (x[0] / r_full < s.min_factor or x[5] < s.t_min)
+        tried = [x for x in pmap(s, without, kept) if x is not None]
+        for k in kept:  # what each adds to this model (kept only if this round is the last)
+            cands[k].rmse_without = next((x[0] for x in tried if x[1] == k), None)
+        trials = [x for x in tried
+                  if r_full > 0 and (x[0] / r_full < s.min_factor or x[5] < s.t_min)
                   and not _needed_in_training(s, x[4], e_full)]
         if not trials:
             break
@@ -78,6 +83,8 @@ def prune(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarray]], c
         kept.remove(nm)
         m_full, th_full, e_full, r_full = mm, th, e, r
         changed = True
+        for k in kept:  # measured on the model before this drop
+            cands[k].rmse_without = None
     if changed:
         ladder.append(Rung(m_full.name, effect_order(m_full), r_full, rmse(e_full[train])))
         models[m_full.name] = (m_full, th_full)
