@@ -84,7 +84,7 @@ class Rung:
 
     model: str
     #: The rung's effects in the order its model applies them (innermost first: what ``hyst fit --effects``
-    #: takes); the order they were found in is the diagnosis's ranking.
+    #: takes); the diagnosis's ranking is :func:`final_order`'s.
     effects: list
     rmse: float
     rmse_train: float
