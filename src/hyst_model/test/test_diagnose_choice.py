@@ -146,7 +146,8 @@ def test_a_rung_refits_only_simpler_configurations_that_screened_alike():
 
 
 def test_the_final_models_effects_after_the_first_rank_by_what_each_adds():
-    from hyst_model.diagnose.stages import Candidate, final_order
+    from hyst_model.diagnose.setup import Candidate
+    from hyst_model.diagnose.verdict import final_order
 
     def cand(nm, without):
         return Candidate(nm, 1e-9, 1e-9, 1.0, True, 0.0, "", rmse_without=without)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.signal import cont2discrete, lfilter
 
-from hyst_model.diagnose.stages import Candidate, _screened
+from hyst_model.diagnose.setup import Candidate
+from hyst_model.diagnose.stages import _screened
 from hyst_model.effects.dynamics import DynamicsEffect, series_filter
 from hyst_model.identify import fit
 from hyst_model.diagnose.refit import validation_mask

@@ -6,7 +6,7 @@ import numpy as np
 from hyst_model.core import pea_default
 from hyst_model.diagnose.ladder import _fresh_start
 from hyst_model.diagnose.refit import _simulate, default_fitter, rmse, validation_mask
-from hyst_model.diagnose.stages import Setup
+from hyst_model.diagnose.setup import Setup
 from hyst_model.effects import effects_data_config
 from hyst_model.effects.signals import noise_floor
 from hyst_model.spec import build_model

@@ -24,14 +24,15 @@ from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
 from .refit import _effect_values, _point, guarded_refit, refit, rmse
-from .stages import Setup, effect_order, n_params, own_config, variant_suffix
+from .setup import Setup
+from .stages import effect_order, n_params, own_config, variant_suffix
 
 __all__ = ["alike_refits", "simpler_alike"]
 
 
 def alike_refits(own: Setup, entry: tuple, cands: dict) -> tuple[Model, np.ndarray, np.ndarray] | None:
     """The best refit of a rung's refit ``entry`` (validation RMSE, new effect, model, θ, residual) with one
-    carried effect in another configuration of its :attr:`~.stages.Candidate.alike`: from that configuration's
+    carried effect in another configuration of its :attr:`~.setup.Candidate.alike`: from that configuration's
     own values (base and effect), the other carried effects' and the new effect's values from ``entry``; and from
     the bare base, every effect from its own data start.
     ``None`` when no carried effect has another alike configuration or every such refit failed."""

@@ -16,7 +16,7 @@ from ..effects.signals import fmt_len
 from .refit import paired_t, rmse
 
 if TYPE_CHECKING:  # stages calls this module on the base's refits
-    from .stages import Setup
+    from .setup import Setup
 
 __all__ = ["training_only", "helps", "beaten_in_training"]
 

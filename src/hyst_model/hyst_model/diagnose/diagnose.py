@@ -48,7 +48,9 @@ from .parallel import default_jobs
 from .prune import prune
 from .swap import swap
 from .ladder import climb
-from .stages import Candidate, Rung, Setup, refit_all, screen_all, verdict
+from .setup import Candidate, Rung, Setup
+from .stages import refit_all, screen_all
+from .verdict import verdict
 from .undetermined import sentence, undetermined
 from .unexplained import UNEXPLAINED_FACTOR, Unexplained
 

@@ -15,8 +15,9 @@ from .alike import alike_refits, simpler_alike
 from .blind import beaten_in_training, training_only
 from .parallel import pmap
 from .refit import _effect_values, guarded_refit, paired_t, refit, rmse
-from .stages import (Candidate, Rung, Setup, _better_config, effect_order, effect_variants, n_params, own_config,
-                     screen_on, variant_label, variant_suffix)
+from .setup import Candidate, Rung, Setup
+from .stages import (_better_config, effect_order, effect_variants, n_params, own_config, screen_on, variant_label,
+                     variant_suffix)
 
 __all__ = ["climb", "prefer_simpler", "training_only", "n_params", "effect_order", "STRONG_SIGNATURE",
            "SIGNATURE_MARGIN", "OTHER_ORDER_TOP"]

@@ -16,7 +16,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any, TypeVar
 
 if TYPE_CHECKING:
-    from .stages import Setup
+    from .setup import Setup
 
 __all__ = ["pmap", "default_jobs", "MAX_JOBS"]
 

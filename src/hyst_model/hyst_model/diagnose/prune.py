@@ -25,7 +25,8 @@ from .blind import helps
 from .ladder import effect_order
 from .parallel import pmap
 from .refit import _simulate, paired_t, rmse
-from .stages import Rung, Setup, refit_from_final
+from .setup import Rung, Setup
+from .stages import refit_from_final
 
 __all__ = ["prune"]
 

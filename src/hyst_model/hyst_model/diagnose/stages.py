@@ -1,14 +1,13 @@
-"""The stages of :func:`hyst_model.diagnose.diagnose.diagnose`: screen → refit → (ladder: :mod:`.ladder`) → verdict.
+"""The first stages of :func:`hyst_model.diagnose.diagnose.diagnose`: screen → refit (then the ladder, :mod:`.ladder`,
+and the answer, :mod:`.verdict`).
 
-Each stage reads the fitted base and the record from a :class:`Setup` and returns plain results; the
+Each stage reads the fitted base and the record from a :class:`~.setup.Setup` and returns plain results; the
 orchestration (checks, the base fit, the :class:`~hyst_model.diagnose.diagnose.Diagnosis`) is in ``diagnose.py``.
 """
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import cast
 
 import numpy as np
@@ -21,113 +20,10 @@ from ..model import Model
 from .refit import Fixed, _Progress, _effect_values, _simulate, guarded_refit, paired_t, refit, rmse
 from .blind import training_only
 from .parallel import pmap
-from .unexplained import Unexplained, explain_unexplained
+from .setup import Candidate, Setup
 
-__all__ = ["Candidate", "Rung", "Setup", "screen_on", "n_params", "screen_all", "refit_all", "rebase", "verdict",
-           "effect_order", "effect_variants", "own_config", "refit_from_final", "validate_alike", "variant_label",
-           "variant_suffix"]
-
-
-@dataclass
-class Candidate:
-    """One effect tested against the data.
-
-    Attributes
-    ----------
-    effect : str
-    rmse : float
-        Validation RMSE of base + effect (m).
-    rmse_train : float
-    improvement : float
-        Baseline validation RMSE / this RMSE (> 1 is better).
-    significant : bool
-        Passes the margin and the paired test.
-    score : float
-        Residual-signature score in [0, 1].
-    evidence : str
-        Why, in words.
-    t_stat : float
-        Paired t statistic of the squared-error reduction on validation chunks.
-    params : dict
-        Fitted effect parameters (namespaced).
-    """
-
-    effect: str
-    rmse: float
-    rmse_train: float
-    improvement: float
-    significant: bool
-    score: float
-    evidence: str
-    t_stat: float = 0.0
-    params: dict = field(default_factory=dict)
-    on_top_of: list = field(default_factory=list)
-    note: str = ""
-    #: The second-best screened configuration, ``(effect values, variant)``, when the screens held the base fixed:
-    #: refitted jointly too (:func:`refit_all`). Not reported.
-    runner_up: tuple | None = None
-    #: ``(variant, values)`` of each configuration whose screen validated within ``min_factor`` of the best
-    #: one's, or whose squared error exceeds the best one's by less than the best leaves above the noise floor
-    #: (another effect still in the residual can tip the choice), the kept one included, with the base and effect
-    #: values it reached: the record could not settle between them on the base, so the ladder refits its rungs
-    #: in the others too (:mod:`.alike`). Not reported.
-    alike: list = field(default_factory=list)
-    #: Validation RMSE (m) of the final model refitted without this effect (the backward step's last round, on
-    #: the final model: what this effect adds given the others); None where not tested (a one-effect answer, an
-    #: effect not in it, a refit that failed). Ranks the final model's effects after the first (:func:`verdict`).
-    rmse_without: float | None = None
-
-
-@dataclass
-class Rung:
-    """One step of the error ladder."""
-
-    model: str
-    #: The rung's effects in the order its model applies them (innermost first: what ``hyst fit --effects``
-    #: takes); the diagnosis's ranking is :func:`final_order`'s.
-    effects: list
-    rmse: float
-    rmse_train: float
-
-
-@dataclass
-class Setup:
-    """What every stage reads: the record, the hold-out, the configuration and the fitted base."""
-
-    t: np.ndarray
-    u: np.ndarray
-    y: np.ndarray
-    val: np.ndarray
-    dt: float
-    cfg: dict
-    fixed: dict
-    base: str
-    base_model: Model
-    names: list
-    fit: Callable
-    say: Callable
-    noise: float
-    th_base: np.ndarray
-    e_base: np.ndarray
-    min_factor: float
-    t_min: float
-    noise_margin: float
-    full_rate_top: int
-    max_rungs: int
-    #: Threads for the candidates' fits (:func:`~.parallel.pmap`); the result does not depend on it.
-    jobs: int = 1
-
-    @property
-    def train(self) -> np.ndarray:
-        return ~self.val
-
-    @property
-    def base_val(self) -> float:
-        return rmse(self.e_base[self.val])
-
-    @property
-    def at_floor(self) -> bool:
-        return self.base_val <= self.noise_margin * self.noise
+__all__ = ["screen_on", "n_params", "screen_all", "refit_all", "rebase", "effect_order", "effect_variants",
+           "own_config", "refit_from_final", "validate_alike", "variant_label", "variant_suffix"]
 
 
 def refit_from_final(s: Setup, names: list, start: dict, final: ComposedModel, th_final: np.ndarray, **kw):
@@ -512,70 +408,3 @@ def rebase(s: Setup, full: dict) -> bool:
         s.say(f"base {s.base} refitted from the base parameters of +{nm}: validation RMSE {fmt_len(best_val)}",
               step=False)
     return found is not None
-
-
-def final_order(chosen: list, cands: dict) -> list:
-    """The final model's effects, best first: the ladder's first (what explains most of the error on its own),
-    then the others by what each adds to the final model — the validation RMSE without it, worst first.
-
-    The ladder adds effects greedily, so after the first its order follows the path: an effect taken on a rung
-    can stand in for part of one taken later, which then explains more (generated GMA stage 3800163, creep with
-    two modes: creep, then a delay imitating the modes' phase, then the modes; without the delay the final model
-    validates at 2.62 nm against 2.61 nm, without the modes at 4.37 nm — the modes are what the record needs
-    second). The backward step's last round measured exactly that (:attr:`Candidate.rmse_without`); where it did
-    not run on every one of them, the ladder's order stands."""
-    rest = list(chosen[1:])
-    if len(rest) < 2 or any(cands[nm].rmse_without is None for nm in rest):
-        return list(chosen)
-    return [chosen[0]] + sorted(rest, key=lambda nm: -float(cands[nm].rmse_without))
-
-
-def verdict(s: Setup, cands: dict, ladder: list, models: dict[str, tuple[Model, np.ndarray]], chosen: list,
-            unexplained_factor: float, explain: Callable) -> tuple[list, str, Unexplained | None, str]:
-    """Stage 4: the answer — candidates best first, the missing effect (``none``/``unexplained`` included),
-    the description of an unexplained remainder, and the explanation in words.
-
-    ``explain(candidate, base, rmse_it_improves_on)`` writes each candidate's evidence sentence.
-    """
-    base, noise, base_val = s.base, s.noise, s.base_val
-    # Best first: the final model's effects, then the rest by validation RMSE.
-    ranked = [cands[nm] for nm in final_order(chosen, cands)] + sorted(
-        (c for c in cands.values() if c.effect not in chosen), key=lambda c: (not c.significant, c.rmse))
-    rung_val = {tuple(rg.effects): rg.rmse for rg in ladder}
-    for c in ranked:
-        c.evidence = explain(c, base, rung_val.get(tuple(c.on_top_of), base_val))
-        if c.note:
-            c.evidence += f"; {c.note}"
-        if c.rmse_without is not None and c.effect in chosen:
-            c.evidence += f"; without it the final model validates at {fmt_len(c.rmse_without)}"
-    missing = chosen[0] if chosen else "none"
-    left = ladder[-1].rmse
-    unexplained = None
-    if left >= unexplained_factor * noise:
-        m_last, th_last = models[ladder[-1].model]
-        e_last = s.y - _simulate(m_last, th_last, s.t, s.u)
-        # Learn the loop-shape function on the first half of the held-out samples, test it on the second: both
-        # halves are out of sample for the model (its training residual is fitted away and says little).
-        vi = np.flatnonzero(s.val)
-        first = np.zeros(vi.size, dtype=bool)
-        first[: vi.size // 2] = True
-        unexplained = explain_unexplained(s.u[vi], e_last[vi], first, left, noise, base,
-                                          [nm for nm in s.names if nm not in chosen])
-        if not chosen:
-            missing = "unexplained"
-    if s.at_floor and not chosen:
-        expl = (f"the {base} model already predicts held-out data to {fmt_len(base_val)} RMS, at the sensor "
-                f"noise floor ({fmt_len(noise)}): no effect is missing")
-    elif not chosen:
-        expl = (f"the {base} model leaves {fmt_len(base_val)} RMS (noise floor {fmt_len(noise)}), but no candidate "
-                f"predicts held-out data significantly better (needs ≥ {s.min_factor:g}× and paired t ≥ "
-                f"{s.t_min:g}); the remaining error is none of: {', '.join(s.names)}")
-        if unexplained is not None:
-            expl = f"unexplained ({unexplained.kind}): {unexplained.evidence}"
-    else:
-        expl = " → ".join(f"{r.model} {fmt_len(r.rmse)}" for r in ladder)
-        expl += (" (at the noise floor)" if left <= s.noise_margin * noise else
-                 f" (still {left / noise:.1f}× the noise floor: something else is missing too)")
-        if unexplained is not None:
-            expl += f"; what is left is {unexplained.kind}: {unexplained.evidence}"
-    return ranked, missing, unexplained, expl

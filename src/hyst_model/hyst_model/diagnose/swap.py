@@ -25,7 +25,8 @@ from ..model import Model
 from .ladder import effect_order
 from .parallel import pmap
 from .refit import _effect_values, _simulate, paired_t, rmse
-from .stages import Rung, Setup, own_config, refit_from_final, validate_alike
+from .setup import Rung, Setup
+from .stages import own_config, refit_from_final, validate_alike
 
 __all__ = ["swap", "alone_significant"]
 

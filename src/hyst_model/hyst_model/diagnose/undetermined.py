@@ -20,7 +20,8 @@ import numpy as np
 from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from .refit import paired_t, rmse
-from .stages import Setup, validate_alike
+from .setup import Setup
+from .stages import validate_alike
 
 __all__ = ["CONTRIBUTION", "Undetermined", "undetermined", "sentence"]
 
