@@ -100,12 +100,12 @@ def test_base_fit_reaches_the_noise_floor_on_a_stage_with_fast_memory():
 @pytest.mark.parametrize("seed,shapes", [(2200070, "thesis"), (2200163, "wide"), (2200178, "wide"),
                                          (2300013, "wide"), (2300048, "wide")])
 def test_base_fit_reaches_the_noise_floor_where_the_equation_error_starts_missed(seed, shapes):
-    """Effect-free generated records whose base fits ended at 27-195x the noise floor (the truth, inside the
-    bounds, sits at it). Three causes, each fixed in :func:`hyst_model.identify.fast.equation_error_starts` or the
-    bounds: 2200070 (a piezo driven at 54-98 V) has its offset, the reading at 0 V, 15 µm below every reading,
-    outside the offsets searched; 2200163 and 2200178 have input memories longer than their output's (δ2 > δ1),
-    so ζ1 is 2.0 and 1.2 in the data's units, beyond Table 3.1's 0.9; and the regression clipped each coefficient
-    to its bound on its own, which breaks ψ1 + α1 when ν keeps one sign (only their sum is then seen)."""
+    """Effect-free generated records whose base fits ended at 27-195x the noise floor (the truth, inside the bounds,
+    sits at it). Three causes, each fixed in :func:`~hyst_model.identify.equation_error.equation_error_starts` or
+    the bounds: 2200070 (a piezo driven at 54-98 V) has its offset, the reading at 0 V, 15 µm below every reading,
+    outside the offsets searched; 2200163 and 2200178 have input memories longer than their output's (δ2 > δ1), so
+    ζ1 is 2.0 and 1.2 in the data's units, beyond Table 3.1's 0.9; and the regression clipped each coefficient to
+    its bound on its own, which breaks ψ1 + α1 when ν keeps one sign (only their sum is then seen)."""
     c = generate_case(seed, "none", shapes=shapes)
     assert _held_out_base_error(c) < 1.3 * c.noise
 
@@ -113,7 +113,7 @@ def test_base_fit_reaches_the_noise_floor_where_the_equation_error_starts_missed
 @pytest.mark.parametrize("rate", [True, False])
 def test_offset_scan_equals_the_regression_at_each_offset(rate):
     """The one-sweep offset scan gives the same normal equations as building them at each offset."""
-    from hyst_model.identify.fast import _ee_normal, _ee_normal_scan
+    from hyst_model.identify.equation_error import _ee_normal, _ee_normal_scan
     rng = np.random.default_rng(3)
     y0 = np.cumsum(rng.normal(size=800))
     y1 = y0 + rng.normal(size=800)

@@ -1,9 +1,9 @@
 """The input-to-output lag of an MBW stage from equation-error fits of the record shifted against itself.
 
-A transport delay of d samples makes (3.21) wrong at every step, whatever its parameters; with the output
-advanced by d samples the record is an MBW record again and its equation-error start
-(:func:`~hyst_model.identify.fast.equation_error_starts`) reaches the noise floor in free run. The free-run error
-of the best start over the lag is therefore sharp and single-dipped where the stage is an MBW: on a generated
+A transport delay of d samples makes (3.21) wrong at every step, whatever its parameters; with the output advanced by
+d samples the record is an MBW record again and its equation-error start
+(:func:`~hyst_model.identify.equation_error.equation_error_starts`) reaches the noise floor in free run. The free-run
+error of the best start over the lag is therefore sharp and single-dipped where the stage is an MBW: on a generated
 wide-shape piezo stage with a 13.5-sample sensor delay it fell from 41x the noise floor at lag 0 to 1.05x at lag 13
 and rose again to 125x at lag 40, while the impulse response of Δy to Δu (:func:`hyst_model.effects.delay._fir_delay`)
 was smeared by the stage's own memory and peaked at its last tap.
@@ -23,7 +23,7 @@ _MEMO = FitMemo(8)
 
 def _cost(u: np.ndarray, y: np.ndarray, d: int, rows: int) -> float:
     from ..models import data_config  # late: the model registry imports this package's users
-    from .fast import equation_error_starts
+    from .equation_error import equation_error_starts
     n = u.size
     us, ys = u[: n - d], y[d:]
     cfg = data_config(us, ys)
