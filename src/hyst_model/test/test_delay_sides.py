@@ -70,6 +70,26 @@ def test_fir_start_declines_on_smooth_input():
     assert _fir_delay(u, y, 40) is None
 
 
+def test_start_is_remembered_by_the_record_and_only_by_it():
+    """The start depends on the record alone, so a diagnosis's many delay refits reuse it: the same τ as computed
+    afresh, and another record (one sample changed) is computed anew."""
+    from hyst_model.effects import delay as dmod
+    t, u, y = _record(5, 3.4, "output")
+    cfg = {"dt": DT, "u_scale": 15.0, "y_scale": 5e-6}
+    d = Delay({**cfg, "delay.side": "output"})
+    hits = dmod._FIR_MEMO.hits
+    first = d.start(t, u, y, np.zeros_like(y))
+    again = d.start(t, u, y, np.zeros_like(y))
+    assert dmod._FIR_MEMO.hits == hits + 1 and again == first
+    assert first["tau"] == pytest.approx(3.4 * DT, abs=0.1 * DT)
+    dt = float(np.median(np.diff(t)))  # as the start reads it
+    assert first["tau"] == float(np.clip(_fir_delay(u, y, 40) * dt, 0.0, d.params()[0].upper))
+    y2 = y.copy()
+    y2[4000] += 1e-6  # another record: not served from the memo
+    d.start(t, u, y2, np.zeros_like(y))
+    assert dmod._FIR_MEMO.hits == hits + 1
+
+
 @pytest.mark.parametrize("side", ["input", "output"])
 def test_diagnose_names_a_sub_sample_delay_on_steps(side):
     from hyst_model.diagnose.diagnose import diagnose
