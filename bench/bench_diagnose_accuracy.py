@@ -89,6 +89,27 @@ def _band(r: dict) -> str:
     return r["kind"]
 
 
+#: What an unexplained remainder should be called, by the generated truth (the case name's form; ``-`` is the
+#: Prandtl–Ishlinskii truth): another hysteresis or a dead zone in the input is the loop's shape, a load change
+#: during the record is not (:mod:`hyst_model.diagnose.unexplained`).
+RIGHT_LABEL = {"-": "loop shape", "deadzone_in": "loop shape", "stiffness_change": "outside the library"}
+
+
+def _label_line(res: list[dict]) -> str:
+    """How often the unexplained remainder got the label its truth calls for, per truth (where one was given)."""
+    got: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+    for r in res:
+        form = r["case"].rsplit(":", 1)[-1]
+        if r["kind"] in ("outside", "pi_truth") and r.get("unexplained") and form in RIGHT_LABEL:
+            name = "Prandtl–Ishlinskii truth" if form == "-" else form
+            got[name][0] += r["unexplained"] == RIGHT_LABEL[form]
+            got[name][1] += 1
+    if not got:
+        return ""
+    return "unexplained remainder labelled as its truth calls for: " + ", ".join(
+        f"{k} ({RIGHT_LABEL['-' if k.startswith('Prandtl') else k]}) {a}/{n}" for k, (a, n) in sorted(got.items()))
+
+
 def summarise(res: list[dict]) -> str:
     lines = []
     exp_names = sorted({e for r in res for e in r["expected"]})
@@ -157,6 +178,9 @@ def summarise(res: list[dict]) -> str:
                  f"(the record cannot exclude it), and an effect not in the truth on {und_wrong} others")
     lines.append(f"caution (the base does not carry over to the record's own hold-out) on {cautioned} cases, "
                  f"{wrong_with} of them answered wrong; {wrong_without} wrong answers without it")
+    label = _label_line(res)
+    if label:
+        lines.append(label)
     errs = [r for r in res if "error" in r]
     secs = [r["seconds"] for r in res]
     load = os.getloadavg()[0]

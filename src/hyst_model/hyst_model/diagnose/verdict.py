@@ -54,13 +54,13 @@ def verdict(s: Setup, cands: dict, ladder: list, models: dict[str, tuple[Model, 
     unexplained = None
     if left >= unexplained_factor * noise:
         m_last, th_last = models[ladder[-1].model]
-        e_last = s.y - _simulate(m_last, th_last, s.t, s.u)
-        # Learn the loop-shape function on the first half of the held-out samples, test it on the second: both
+        y_last = _simulate(m_last, th_last, s.t, s.u)
+        # Learn the loop-shape functions on the first half of the held-out samples, test them on the second: both
         # halves are out of sample for the model (its training residual is fitted away and says little).
         vi = np.flatnonzero(s.val)
         first = np.zeros(vi.size, dtype=bool)
         first[: vi.size // 2] = True
-        unexplained = explain_unexplained(s.u[vi], e_last[vi], first, left, noise, base,
+        unexplained = explain_unexplained(s.u, s.y - y_last, y_last, vi, first, left, noise, base,
                                           [nm for nm in s.names if nm not in chosen])
         if not chosen:
             missing = "unexplained"
