@@ -97,11 +97,16 @@ def loop_shape_share(u: np.ndarray, e: np.ndarray, train: np.ndarray, levels: in
     counts = np.bincount(g[train], minlength=ng)
     sums = np.bincount(g[train], weights=e[train] - off, minlength=ng)
     means = np.divide(sums, counts, out=np.zeros_like(sums), where=counts >= 5)
-    et = e[test] - e[test].mean()
-    pred = means[g[test]]
+    return _explained_share(e[test], means[g[test]])
+
+
+def _explained_share(actual: np.ndarray, pred: np.ndarray) -> float:
+    """1 − (prediction error power / power) of ``actual`` about their means, clipped to [0, 1]; 0 when there is
+    nothing to explain or the prediction is not finite."""
+    et = actual - actual.mean()
     pred = pred - pred.mean()
     power = float(np.mean(et * et))
-    if power <= 0.0:
+    if power <= 0.0 or not np.all(np.isfinite(pred)):
         return 0.0
     return float(np.clip(1.0 - np.mean((et - pred) ** 2) / power, 0.0, 1.0))
 
@@ -155,13 +160,7 @@ def operator_share(u: np.ndarray, e: np.ndarray, yhat: np.ndarray, idx: np.ndarr
     A = (A - mu) / sd
     G = A.T @ A
     w = np.linalg.solve(G + OPERATOR_RIDGE * A.shape[0] * np.eye(G.shape[0]), A.T @ (b - b.mean()))
-    pred = ((F[test] - mu) / sd) @ w
-    et = ev[test] - ev[test].mean()
-    pred = pred - pred.mean()
-    power = float(np.mean(et * et))
-    if power <= 0.0 or not np.all(np.isfinite(pred)):
-        return 0.0
-    return float(np.clip(1.0 - np.mean((et - pred) ** 2) / power, 0.0, 1.0))
+    return _explained_share(ev[test], ((F[test] - mu) / sd) @ w)
 
 
 def explain_unexplained(u: np.ndarray, e: np.ndarray, yhat: np.ndarray, idx: np.ndarray, train: np.ndarray,
