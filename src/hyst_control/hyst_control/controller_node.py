@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
@@ -74,6 +74,7 @@ class ControllerNode(AtomicParametersNode):
         self._ctrl: Any = None  # the running law (possibly Compensated); None until the first state
         self._y = math.nan
         self._ref: tuple[float, float, float] | None = None  # (t_stamp, r, rdot)
+        self._source: Callable[[float], float] | None = None  # in-process reference r(t) (:meth:`follow`)
         self._last_state_wall: float | None = None
         self._tripped = False
         self._n = dict.fromkeys(("states", "commands", "bad_states", "bad_refs", "watchdog_trips", "switches", "gaps",
@@ -293,6 +294,13 @@ class ControllerNode(AtomicParametersNode):
             self.get_logger().info(new.message)
 
     # Messages -------------------------------------------------------------------------------------------
+    def follow(self, source: Callable[[float], float] | None) -> None:
+        """Take the reference from ``source`` (r in m at a time in s on the state stamps' clock) instead of
+        ``/stage/reference``; None returns to the topic. For a reference generator in the same process
+        (``hyst_loop_node``): exact at each sample, no extrapolation, no message per sample. The ``reference``
+        parameter (an internal generator) still takes precedence."""
+        self._source = source
+
     def _on_reference(self, msg: JointState) -> None:
         if not msg.position or not math.isfinite(msg.position[0]):
             self._n["bad_refs"] += 1
@@ -308,6 +316,8 @@ class ControllerNode(AtomicParametersNode):
             if self._t0 is None:
                 self._t0 = t_state
             return gen(t_state + 1.0 / self._settings.rate + ahead - self._t0)
+        if self._source is not None:
+            return _F(self._source(t_state + 1.0 / self._settings.rate + ahead))
         if self._ref is None:
             return self._ctrl.last_reference if self._ctrl is not None else y  # hold where the stage is
         t_ref, r, v = self._ref
@@ -332,7 +342,8 @@ class ControllerNode(AtomicParametersNode):
         if self._ctrl is None or self._tripped:
             u0 = _F(msg.effort[0]) if msg.effort and math.isfinite(msg.effort[0]) else s.limits.v_safe
             c = self._build(s)
-            c.reset(y, u0, y if self._ref is None and s.reference is None else self._target(t, y))
+            no_reference = self._ref is None and self._source is None and s.reference is None
+            c.reset(y, u0, y if no_reference else self._target(t, y))
             self._ctrl = c
             self._skip = int(0.25 * s.rate)
             self._pending = math.nan

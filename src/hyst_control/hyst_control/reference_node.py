@@ -73,19 +73,27 @@ class ReferenceNode(AtomicParametersNode):
             self.destroy_timer(self._timer)
             self._timer = self.create_timer(1.0 / rate, self._tick)
 
-    def _tick(self) -> None:
-        now = self.get_clock().now()
-        t_ns = now.nanoseconds
+    def sample_at(self, t_ns: int) -> tuple[float, float]:
+        """(r in m, ṙ in m/s) of the trajectory at clock time ``t_ns`` (ns), as a publication stamped then carries.
+
+        The trajectory starts at the first time asked for (published or sampled). ``hyst_loop_node`` samples it
+        in process at each state's time, exactly, instead of a topic hop per sample.
+        """
         if self._t_start is None:
             self._t_start = t_ns
-        t = (t_ns - self._t_start) * 1e-9
+        t = max(t_ns - self._t_start, 0) * 1e-9
         hold = self._duration > 0 and t > self._duration
         r, v = self._ref.sample(min(t, self._duration) if hold else t)
+        return float(r), 0.0 if hold or not math.isfinite(v) else float(v)
+
+    def _tick(self) -> None:
+        now = self.get_clock().now()
+        r, v = self.sample_at(now.nanoseconds)
         msg = JointState()
         msg.header.stamp = now.to_msg()
         msg.name = ["stage"]
-        msg.position = [float(r)]
-        msg.velocity = [0.0 if hold or not math.isfinite(v) else float(v)]
+        msg.position = [r]
+        msg.velocity = [v]
         self._pub.publish(msg)
 
 

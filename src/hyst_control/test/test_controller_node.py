@@ -239,3 +239,28 @@ def test_a_model_that_diverges_within_the_command_limits_is_refused_where_it_run
                  f"      alpha1: {bad}\n")
     with pytest.raises(Exception, match="diverges"):
         harness("--params-file", str(p))
+
+
+@pytest.mark.parametrize("in_process", [True, False])
+def test_an_in_process_reference_is_sampled_exactly_at_each_state(harness, in_process):
+    """``follow`` (hyst_loop_node's wiring): the target of the command answering state k is r(t_k + 1/rate), with
+    no topic and no extrapolation — a stage that sits exactly on r has zero tracking error. Without it (no
+    /stage/reference either) the controller holds where the stage is and the same stage shows an error."""
+    node, peer, ex, pub, got = harness("-p", "watchdog_periods:=100000")
+
+    def r(t: float) -> float:
+        return 15e-6 + 5e-6 * math.sin(2 * math.pi * 5.0 * (t - 100.0))
+
+    if in_process:
+        node.follow(r)
+    assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
+    n = 400  # the first 0.25 s after a start are left out of the statistics
+    for k in range(n):
+        pub.publish(_state(k, r(100 + k // 1000 + (k % 1000) * 1e-3), 50.0))
+        assert _spin_until(ex, lambda: len(got["cmd"]) > k)
+    st = node.tracking_summary()["dppc"]
+    assert st["samples"] == n - 250
+    if in_process:
+        assert st["rmse"] < 1e-12
+    else:
+        assert st["rmse"] > 5e-8

@@ -36,6 +36,9 @@ def test_publishes_sine_with_rate_and_validates_parameters():
             r, v = ref.sample((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec - t0) * 1e-9)
             assert m.position[0] == pytest.approx(r, abs=1e-12)
             assert m.velocity[0] == pytest.approx(v, abs=1e-9)
+        for m in got:  # what the in-process loop samples is what was published at that time
+            t_ns = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+            assert node.sample_at(t_ns) == (m.position[0], m.velocity[0])
         res = node.set_parameters([Parameter("shape", value="square")])[0]
         assert not res.successful and "unknown reference shape" in res.reason
         assert node.set_parameters([Parameter("shape", value="c1")])[0].successful
