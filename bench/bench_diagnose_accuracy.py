@@ -93,6 +93,7 @@ def _band(r: dict) -> str:
 #: Prandtl–Ishlinskii truth): another hysteresis or a dead zone in the input is the loop's shape, a load change
 #: during the record is not (:mod:`hyst_model.diagnose.unexplained`).
 RIGHT_LABEL = {"-": "loop shape", "deadzone_in": "loop shape", "stiffness_change": "outside the library"}
+TRUTH_NAME = {"-": "Prandtl–Ishlinskii truth"}  # the PI truth's case name carries no effect form
 
 
 def _label_line(res: list[dict]) -> str:
@@ -101,13 +102,13 @@ def _label_line(res: list[dict]) -> str:
     for r in res:
         form = r["case"].rsplit(":", 1)[-1]
         if r["kind"] in ("outside", "pi_truth") and r.get("unexplained") and form in RIGHT_LABEL:
-            name = "Prandtl–Ishlinskii truth" if form == "-" else form
-            got[name][0] += r["unexplained"] == RIGHT_LABEL[form]
-            got[name][1] += 1
+            got[form][0] += r["unexplained"] == RIGHT_LABEL[form]
+            got[form][1] += 1
     if not got:
         return ""
     return "unexplained remainder labelled as its truth calls for: " + ", ".join(
-        f"{k} ({RIGHT_LABEL['-' if k.startswith('Prandtl') else k]}) {a}/{n}" for k, (a, n) in sorted(got.items()))
+        f"{TRUTH_NAME.get(f, f)} ({RIGHT_LABEL[f]}) {a}/{n}"
+        for f, (a, n) in sorted(got.items(), key=lambda kv: TRUTH_NAME.get(kv[0], kv[0])))
 
 
 def summarise(res: list[dict]) -> str:

@@ -140,13 +140,7 @@ class Delay(Effect):
 def _fir_delay_memo(u: np.ndarray, y: np.ndarray, lags: int) -> float | None:
     """:func:`_fir_delay`, remembered by the record's content: it depends on the record alone, and a diagnosis
     starts the delay at every refit that holds one (61 times on a 60k-sample record, 90 ms each)."""
-    key = content_key("fir_delay", u, y, lags)
-    hit = _FIR_MEMO.get(key)
-    if hit is not None:
-        return hit[0]
-    tau = _fir_delay(u, y, lags)
-    _FIR_MEMO.put(key, (tau,))
-    return tau
+    return _FIR_MEMO.get_or(content_key("fir_delay", u, y, lags), lambda: (_fir_delay(u, y, lags),))[0]
 
 
 def _fir_delay(u: np.ndarray, y: np.ndarray, lags: int) -> float | None:

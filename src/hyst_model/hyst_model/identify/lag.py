@@ -74,10 +74,12 @@ def equation_error_lag(u: np.ndarray, y: np.ndarray, max_lag: int, rows: int = 2
     w = _busiest_window(u, int(max_samples))
     u, y = u[w], y[w]
     max_lag = int(max(0, min(max_lag, u.size // 4)))
-    key = content_key("lag", u, y, max_lag, rows)
-    hit = _MEMO.get(key)
-    if hit is not None:
-        return float(hit[0]), hit[1]
+    lag, prof = _MEMO.get_or(content_key("lag", u, y, max_lag, rows), lambda: _lag_profile(u, y, max_lag, rows))
+    return float(lag), prof
+
+
+def _lag_profile(u: np.ndarray, y: np.ndarray, max_lag: int, rows: int) -> tuple[float, np.ndarray]:
+    """The search of :func:`equation_error_lag` on the chosen window: coarse grid, refined about its best, parabola."""
     prof = np.full(max_lag + 1, np.nan)
 
     def at(d: int) -> float:
@@ -100,5 +102,4 @@ def equation_error_lag(u: np.ndarray, y: np.ndarray, max_lag: int, rows: int = 2
             den = fin[k - 1] - 2.0 * fin[k] + fin[k + 1]
             if den > 0:
                 lag = k + float(np.clip(0.5 * (fin[k - 1] - fin[k + 1]) / den, -0.5, 0.5))
-    _MEMO.put(key, (lag, prof))
     return lag, prof

@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import threading
 from collections import OrderedDict
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -57,3 +57,13 @@ class FitMemo:
             self._d.move_to_end(key)
             while len(self._d) > self.size:
                 self._d.popitem(last=False)
+
+    def get_or(self, key: bytes, compute: Callable[[], tuple]) -> tuple:
+        """The remembered value of ``key``, or ``compute()`` remembered under it (two threads missing the same
+        key at once both compute; the results are equal, the fit being a pure function of the key's content)."""
+        hit = self.get(key)
+        if hit is not None:
+            return hit
+        value = compute()
+        self.put(key, value)
+        return value
