@@ -226,12 +226,16 @@ def _scales(u: np.ndarray, y: np.ndarray) -> dict:
 
 
 class _Progress:
+    """``[diagnose i/total seconds] message`` on stderr. ``total`` is an estimate that the stages raise as they
+    learn their work; a rung's variants can still outnumber it, and the count then never reads past the total."""
+
     def __init__(self, enabled: bool, total: int):
         self.enabled, self.total, self.i, self.t0 = enabled, total, 0, time.perf_counter()
 
     def __call__(self, msg: str, step: bool = True) -> None:
         if step:
             self.i += 1
+            self.total = max(self.total, self.i)
         if self.enabled:
             print(f"[diagnose {self.i}/{self.total} {time.perf_counter() - self.t0:5.1f}s] {msg}",
                   file=sys.stderr, flush=True)
