@@ -14,9 +14,10 @@ callback), limits ``v_min``/``v_max``/``slew_max``/``v_safe``, ``watchdog_period
 Watchdog: no state for ``watchdog_periods``/``rate`` seconds → command ``v_safe`` (slew-limited), log, and
 ERROR on /diagnostics; the next state restarts the controller bumplessly.
 
-Length (~430 lines): one node class is the adapter between messages/parameters and the pure controllers; the
-settings, gains, stability check and compensation it calls already live in their own modules, and what remains
-(declare, validate, swap, the per-sample callback, switching, diagnostics) shares the node's state.
+Length (~460 lines): one node class is the adapter between messages/parameters and the pure controllers; the
+settings and their checks (:func:`~hyst_control.controller_settings.read_settings`), gains, stability check and
+compensation it calls live in their own modules, and what remains (declare, swap, the per-sample callback,
+switching, diagnostics) shares the node's state.
 """
 from __future__ import annotations
 
@@ -30,22 +31,17 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from hyst_common.limits import CommandLimits
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
-from hyst_model.core import MBWParams
 
-from .base import check_model, hand_over
-from .compensation import effect_parameters, plan_compensation
-from .dmrac import TABLE53
+from .base import hand_over
+from .compensation import effect_parameters
 from .errors import ControlError
 from .controllers import ALGORITHMS, make_controller, make_supervised
 from .supervisor import Supervised
-from .reference import parse_reference
-from .controller_settings import (GAINS, MODEL_KEYS, ControllerSettings, cached_guard, model_divergence,
-                                  profile_model)
-from .stability import POLICIES, StabilityVerdict, identified_resonance
+from .controller_settings import GAINS, MODEL_KEYS, ControllerSettings, model_divergence, profile_model, read_settings
+from .stability import StabilityVerdict
 
 __all__ = ["ControllerNode", "ControllerSettings", "main"]
 
@@ -169,49 +165,16 @@ class ControllerNode(AtomicParametersNode):
     def _read(self, changes: dict | None = None) -> ControllerSettings:
         """Settings from current parameters (+ pending ``changes``); raises ControlError/ValueError with a reason."""
         def get(name):
-            return changes[name] if changes and name in changes else self.get_parameter(name).value
+            if changes and name in changes:
+                return changes[name]
+            try:
+                return self.get_parameter(name).value
+            except ParameterUninitializedException:
+                if name == "model.effects":  # declared as a list without a value: none
+                    return ()
+                raise
 
-        alg = str(get("algorithm"))
-        if alg not in ALGORITHMS:
-            raise ControlError(f"algorithm must be one of {', '.join(ALGORITHMS)}, got {alg!r}")
-        if str(get("model.base")) != "mbw":
-            raise ControlError("the controllers invert the MBW model: model.base must be 'mbw'")
-        mdt, rate = _F(get("model.dt")), _F(get("rate"))
-        if mdt > 0 and abs(mdt * rate - 1.0) > 1e-6:
-            raise ControlError(f"the model was identified at dt = {mdt:g} s but rate = {rate:g} Hz: the MBW recursion "
-                               f"is per sample, so set rate:={1.0 / mdt:g} (or refit the model at this rate)")
-        init = str(get("dmrac.initial")).lower()
-        if init != "model" and init not in TABLE53:
-            raise ControlError("dmrac.initial must be model, cs0, cs1, cs2 or cs3")
-        gains = {a: cls(**{n: get(f"{a}.{n}") for n in spec}) for a, (cls, spec) in GAINS.items()}
-        model = check_model(MBWParams(**{k: _F(get(f"model.{k}")) for k in MODEL_KEYS}))  # whatever runs now
-        try:
-            effects = tuple(str(e) for e in (get("model.effects") or ()) if str(e))  # [""] = none (ROS types lists)
-        except ParameterUninitializedException:
-            effects = ()
-        evals = tuple((k, get(f"model.{k}")) for k in self._effect_keys if k.split(".")[0] in effects)
-        policy = str(get("stability.policy"))
-        if policy not in POLICIES:
-            raise ControlError(f"stability.policy must be one of {', '.join(POLICIES)}, got {policy!r}")
-        comp = plan_compensation(model, effects, dict(evals), dict(evals), 1.0 / rate)
-        limits = CommandLimits(_F(get("v_min")), _F(get("v_max")), _F(get("slew_max")), _F(get("v_safe")))
-        divergence = model_divergence(alg, model, comp, limits, 1.0 / rate)  # ControlError: refused
-        # checked as the compensation will run it (a mode it inverts is left only as a model error)
-        res = identified_resonance(effects, dict(evals), comp)
-        notch = get("stability.notch")
-        if not isinstance(notch, bool):
-            raise ControlError(f"stability.notch must be true or false, got {notch!r}")
-        stab = cached_guard(alg, gains.get(alg), model, 1.0 / rate, res, policy, _F(get("stability.gain_margin")),
-                            (_F(get("v_min")), _F(get("v_max"))), notch)  # StabilityError (a ControlError) = rejected
-        s = ControllerSettings(
-            algorithm=alg, rate=_F(get("rate")),
-            limits=limits,
-            watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
-            dmrac_initial=init, model=model,
-            reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, stability=stab,
-            effects=effects, effect_values=evals, gain_sets=tuple(gains.items()), divergence=divergence)
-        make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init, s.compensation())  # checks all
-        return s
+        return read_settings(get, tuple(self._effect_keys))
 
     def _on_set(self, params) -> SetParametersResult:
         try:

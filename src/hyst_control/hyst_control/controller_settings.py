@@ -1,23 +1,27 @@
 """The controller node's settings as plain values (no rclpy): the gain table every ``<algorithm>.<name>`` parameter
 is declared, validated and applied from, the frozen :class:`ControllerSettings` swapped whole on a parameter
-change, and the profile's default stage model."""
+change and built, with every check, by :func:`read_settings`, and the profile's default stage model."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 from hyst_common.limits import CommandLimits
 from hyst_model.core import PARAM_NAMES, MBWParams, pea_default, stage_model
 from hyst_model.core.bounded import mbw_bounded
 
+from .base import check_model
 from .compensation import Compensation, plan_compensation
+from .dmrac import TABLE53
 from .errors import ControlError
-from .controllers import gain_table
-from .reference import Reference
-from .stability import StabilityVerdict, guard
+from .controllers import ALGORITHMS, gain_table, make_controller
+from .reference import Reference, parse_reference
+from .stability import POLICIES, StabilityVerdict, guard, identified_resonance
 
 __all__ = ["ControllerSettings", "GAINS", "MODEL_KEYS", "profile_model", "cached_guard", "cached_bounded",
-           "model_divergence"]
+           "model_divergence", "read_settings"]
 
 #: ``{algorithm: (gains dataclass, {gain: Spec})}`` from the controller registry (the gains' own field metadata):
 #: the one table every ``<algorithm>.<gain>`` parameter is declared, validated and applied from.
@@ -98,3 +102,51 @@ def model_divergence(algorithm: str, model: MBWParams, comp: Compensation | None
                            "a record with steps across the range (hyst fit reports this as 'unstable off its record')")
     return (f"{why}: {algorithm} inverts it one step from the measurement and runs, but the open-loop inverse and "
             "the predictors would refuse it; refit on a record with steps across the range")
+
+
+def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> ControllerSettings:
+    """The settings the node's parameters give, every check made; ``get(name)`` is a parameter's value.
+
+    Raises :class:`~hyst_control.errors.ControlError` (or ValueError) with the reason a parameter set is refused:
+    an unknown algorithm or policy, a model that is not an MBW, a model identified at another rate, gains unstable
+    against an identified resonance under ``refuse``, a model that diverges where it would run open loop, a law
+    that cannot be built. ``effect_keys``: the dotted effect parameters declared (``creep.gain`` ...).
+    """
+    f = float
+    alg = str(get("algorithm"))
+    if alg not in ALGORITHMS:
+        raise ControlError(f"algorithm must be one of {', '.join(ALGORITHMS)}, got {alg!r}")
+    if str(get("model.base")) != "mbw":
+        raise ControlError("the controllers invert the MBW model: model.base must be 'mbw'")
+    mdt, rate = f(get("model.dt")), f(get("rate"))
+    if mdt > 0 and abs(mdt * rate - 1.0) > 1e-6:
+        raise ControlError(f"the model was identified at dt = {mdt:g} s but rate = {rate:g} Hz: the MBW recursion "
+                           f"is per sample, so set rate:={1.0 / mdt:g} (or refit the model at this rate)")
+    init = str(get("dmrac.initial")).lower()
+    if init != "model" and init not in TABLE53:
+        raise ControlError("dmrac.initial must be model, cs0, cs1, cs2 or cs3")
+    gains = {a: cls(**{n: get(f"{a}.{n}") for n in spec}) for a, (cls, spec) in GAINS.items()}
+    model = check_model(MBWParams(**{k: f(get(f"model.{k}")) for k in MODEL_KEYS}))  # whatever runs now
+    effects = tuple(str(e) for e in (get("model.effects") or ()) if str(e))  # [""] = none (ROS types lists)
+    evals = tuple((k, get(f"model.{k}")) for k in effect_keys if k.split(".")[0] in effects)
+    policy = str(get("stability.policy"))
+    if policy not in POLICIES:
+        raise ControlError(f"stability.policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+    comp = plan_compensation(model, effects, dict(evals), dict(evals), 1.0 / rate)
+    limits = CommandLimits(f(get("v_min")), f(get("v_max")), f(get("slew_max")), f(get("v_safe")))
+    divergence = model_divergence(alg, model, comp, limits, 1.0 / rate)  # ControlError: refused
+    # checked as the compensation will run it (a mode it inverts is left only as a model error)
+    res = identified_resonance(effects, dict(evals), comp)
+    notch = get("stability.notch")
+    if not isinstance(notch, bool):
+        raise ControlError(f"stability.notch must be true or false, got {notch!r}")
+    stab = cached_guard(alg, gains.get(alg), model, 1.0 / rate, res, policy, f(get("stability.gain_margin")),
+                        (f(get("v_min")), f(get("v_max"))), notch)  # StabilityError (a ControlError) = rejected
+    s = ControllerSettings(
+        algorithm=alg, rate=rate, limits=limits,
+        watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
+        dmrac_initial=init, model=model,
+        reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, stability=stab,
+        effects=effects, effect_values=evals, gain_sets=tuple(gains.items()), divergence=divergence)
+    make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init, s.compensation())  # checks all
+    return s

@@ -1,0 +1,40 @@
+"""read_settings: the controller node's parameters to plain settings, every check made, without ROS."""
+from __future__ import annotations
+
+import pytest
+
+from hyst_common.profiles import PEA_LIMITS
+from hyst_control.controller_settings import GAINS, MODEL_KEYS, profile_model, read_settings
+from hyst_control.errors import ControlError
+
+
+def _params(**over):
+    m = profile_model("pea")
+    d = {"algorithm": "dppc", "model.base": "mbw", "model.dt": 0.0, "rate": 1000.0, "dmrac.initial": "model",
+         "model.effects": (), "stability.policy": "derate", "stability.notch": True, "stability.gain_margin": 2.0,
+         "v_min": PEA_LIMITS.v_min, "v_max": PEA_LIMITS.v_max, "slew_max": PEA_LIMITS.slew_max,
+         "v_safe": PEA_LIMITS.v_safe, "watchdog_periods": 100, "state_decimation": 10, "reference": ""}
+    d.update({f"{a}.{n}": g.default for a, (_, spec) in GAINS.items() for n, g in spec.items()})
+    d.update({f"model.{k}": float(getattr(m, k)) for k in MODEL_KEYS})
+    d.update({k.replace("__", "."): v for k, v in over.items()})
+    return d.__getitem__
+
+
+def test_the_defaults_give_the_profile_model_and_the_configured_gains():
+    s = read_settings(_params(), ())
+    assert s.algorithm == "dppc" and s.rate == 1000.0 and s.model == profile_model("pea")
+    assert s.gains("dppc") == s.configured("dppc") and s.effects == () and s.reference is None
+    assert read_settings(_params(algorithm="pid", reference="sine:5"), ()).reference is not None
+
+
+@pytest.mark.parametrize(("over", "why"), [
+    ({"algorithm": "lqr"}, "algorithm must be one of"),
+    ({"model__base": "bw"}, "model.base must be 'mbw'"),
+    ({"model__dt": 0.0005}, "set rate:=2000"),
+    ({"dmrac__initial": "cs9"}, "dmrac.initial"),
+    ({"stability__policy": "hope"}, "stability.policy"),
+    ({"stability__notch": "yes"}, "stability.notch"),
+])
+def test_a_parameter_set_the_laws_cannot_run_is_refused_with_its_reason(over, why):
+    with pytest.raises(ControlError, match=why.replace(".", r"\.")):
+        read_settings(_params(**over), ())
