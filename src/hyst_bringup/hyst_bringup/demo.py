@@ -25,7 +25,10 @@ from hyst_sim.bagio import default_bag_path
 
 from .loop import warm_up
 
-__all__ = ["register", "run", "find_executable"]
+__all__ = ["register", "run", "find_executable", "timing_note"]
+
+#: Share of missed real-time periods above which the summary says the figures are the machine's.
+LATE_SHARE_NOTE = 0.05
 
 
 def find_executable(name: str, pkg: str) -> str:
@@ -116,9 +119,22 @@ def run(args: argparse.Namespace) -> int:
     sim = summary.get("sim", {})
     print(f"loop: {summary['controller']['commands']} commands in {summary['seconds']:.1f} s; sim samples "
           f"{sim.get('samples', 0)}, late ticks {sim.get('late_ticks', 0)}; bag: {bag}")
+    note = timing_note(int(sim.get("samples", 0)), int(sim.get("late_ticks", 0)), args.rate)
+    if note:
+        print(note)
     rec_out = rec.stdout.read() if rec.stdout else ""
     if not bag.exists():
         raise LoopError(f"no bag was written ({rec_out.strip()})")
     if len(ran) != len(schedule):
         raise LoopError(f"the loop did not run every algorithm (ran: {', '.join(ran) or 'none'})")
     return 0
+
+
+def timing_note(samples: int, late: int, rate: float) -> str | None:
+    """A sentence when the real-time loop missed more than :data:`LATE_SHARE_NOTE` of its periods, else None."""
+    total = samples + late
+    if total <= 0 or late <= LATE_SHARE_NOTE * total:
+        return None
+    return (f"note: this machine missed {100 * late / total:.0f} % of the {rate:g} Hz periods (the stage ran on at "
+            "the held voltage, unmeasured), so the figures above are the machine's; `hyst demo --lockstep` gives "
+            "the code's")

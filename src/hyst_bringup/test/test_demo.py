@@ -46,3 +46,12 @@ def test_demo_refuses_a_bad_rt_priority_with_one_line(tmp_path):
     proc = subprocess.run([HYST, "demo", "--rt-priority", "120", "--bags", str(tmp_path)], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0 and "rt-priority" in proc.stderr
+
+
+def test_the_summary_says_when_the_machine_missed_real_time_periods():
+    from hyst_bringup.demo import timing_note
+
+    assert timing_note(11900, 100, 2000.0) is None  # < 5 % missed
+    assert timing_note(0, 0, 2000.0) is None
+    note = timing_note(5000, 7000, 2000.0)
+    assert note is not None and "58 %" in note and "2000 Hz" in note and "--lockstep" in note
