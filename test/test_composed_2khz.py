@@ -66,17 +66,17 @@ def test_a_schedule_segment_waits_for_its_first_tracked_sample_within_a_bound():
 
 def test_composed_realtime_samples_the_reference_in_process():
     """Realtime: the controller takes the reference node's trajectory in process (no /stage/reference message per
-    sample); the loop tracks the sine whatever the machine's timing (a wrong time base leaves an error of the
-    sine's own size, 7 µm RMS; a loaded machine's missed periods a fraction of a µm, README)."""
+    sample); the loop tracks the sine whatever the machine's timing: a slow sine (0.5 Hz, 31 µm/s at most) moves
+    0.3 µm in a 10 ms stall, while a wrong time base leaves an error of the sine's own size (µm)."""
     proc = subprocess.run([str(EXE), "--schedule", "dppc:1.5", "--summary-json", "--reference-rate", "100",
-                           "--ros-args", "-p", "rate:=2000.0", "-p", "shape:=sine", "-p", "frequency:=5.0",
+                           "--ros-args", "-p", "rate:=2000.0", "-p", "shape:=sine", "-p", "frequency:=0.5",
                            "-p", "hyst_controller:watchdog_periods:=1000000"],
                           env=dict(os.environ), capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = json.loads([ln for ln in proc.stdout.splitlines() if ln.startswith("{")][-1])
     tr, ctl = out["tracking"]["dppc"], out["controller"]
     assert tr["samples"] > 0 and ctl["bad_refs"] == 0
-    assert tr["rmse"] < 3.5e-6
+    assert tr["rmse"] < 2.5e-6
 
 
 def test_a_bad_reference_rate_is_refused():
