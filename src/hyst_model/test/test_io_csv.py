@@ -57,7 +57,7 @@ def test_nan_rows_reported(tmp_path):
     p = tmp_path / "n.csv"
     rows = "\n".join(f"{k * 1e-3},{k},{k * 1e-7}" for k in range(40))
     p.write_text("t,u,y\n" + rows.replace("0.005,5,5e-07", "0.005,,5e-07") + "\n")
-    with pytest.raises(DataError, match=r"1 row\(s\) with NaN.*row 5"):
+    with pytest.raises(DataError, match=r"1 row\(s\) with NaN.*row 5, t = 0.005 s\)"):
         read_csv(p).check()
 
 

@@ -92,7 +92,7 @@ class Record:
         if bad.any():
             idx = np.flatnonzero(bad)
             raise DataError(f"{where}: {idx.size} row(s) with NaN/inf values (first at row {idx[0]}, "
-                            f"t={self.t[idx[0]]!r}); clean or cut the data first")
+                            f"t = {float(self.t[idx[0]]):g} s); clean or cut the data first")
         if n < min_samples:
             raise DataError(f"{where}: only {n} samples; at least {min_samples} are needed")
         d = np.diff(self.t)
