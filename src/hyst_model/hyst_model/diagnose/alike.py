@@ -23,6 +23,7 @@ import numpy as np
 from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
+from .parallel import pmap
 from .refit import _effect_values, _point, guarded_refit, refit, rmse
 from .setup import Setup
 from .stages import effect_order, n_params, own_config, variant_suffix
@@ -40,38 +41,46 @@ def alike_refits(own: Setup, entry: tuple, cands: dict) -> tuple[Model, np.ndarr
     _, new, mm, tth, _ = entry
     names = effect_order(mm)
     vals = _effect_values(mm, tth)
-    best = None
+    cfg = {k: v for nm in names for k, v in own_config(mm, nm).items()}
+    jobs: list[tuple[str, dict, dict]] = []  # (route, variant, start) in the order they are judged
     for x in names:
         c = cands.get(x)
         if x == new or c is None:  # the new effect's configurations were screened on the rung already
             continue
         now = own_config(mm, x)
         for var, start in c.alike:
-            if not any(now.get(k) != v for k, v in var.items()):
-                continue
-            for nm in names:
-                own.cfg.update(own_config(mm, nm))
-            own.cfg.update(var)
-            mine = {k: v for k, v in start.items() if k.startswith(x + ".")}
-            carry = {**{k: v for k, v in vals.items() if not k.startswith(x + ".")}, **mine}
-            base_vals = {k: v for k, v in start.items() if "." not in k}
-            fits: list[tuple] = []
-            try:
-                fits.append(("its own fit", *guarded_refit(
-                    own.base_model, names, own.cfg, t, u, y, val, {**base_vals, **carry},
-                    theta_base=_point(own.base_model, base_vals), carry=carry, fitter=own.fit)))
-            except (EffectError, FitError):
-                pass
-            try:  # and from the bare base, every effect from its own data start (the route that found 3600018)
-                fits.append(("the base", *refit(own.base_model, names, own.cfg, t, u, y, own.th_base,
-                                                fitter=own.fit)))
-            except (EffectError, FitError):
-                pass
-            for route, m2, th2, yh2 in fits:
-                r2 = rmse((y - yh2)[val])
-                own.say(f"refit {m2.name}{variant_suffix(var)} from {route}: validation RMSE {fmt_len(r2)}")
-                if best is None or r2 < best[0]:
-                    best = (r2, m2, th2, y - yh2)
+            if any(now.get(k) != v for k, v in var.items()):
+                mine = {k: v for k, v in start.items() if k.startswith(x + ".")}
+                carry = {**{k: v for k, v in vals.items() if not k.startswith(x + ".")}, **mine}
+                base_vals = {k: v for k, v in start.items() if "." not in k}
+                # from that configuration's own values; and from the bare base, every effect from its own data
+                # start (the route that found 3600018)
+                jobs.append(("its own fit", var, {"base": base_vals, "carry": carry}))
+                jobs.append(("the base", var, {}))
+
+    def one(job_s: Setup, job: tuple[str, dict, dict]):
+        route, var, start = job
+        job_s.cfg.update(cfg)
+        job_s.cfg.update(var)
+        try:
+            if start:
+                return route, *guarded_refit(
+                    job_s.base_model, names, job_s.cfg, t, u, y, val, {**start["base"], **start["carry"]},
+                    theta_base=_point(job_s.base_model, start["base"]), carry=start["carry"], fitter=job_s.fit)
+            return route, *refit(job_s.base_model, names, job_s.cfg, t, u, y, own.th_base, fitter=job_s.fit)
+        except (EffectError, FitError):
+            return None
+
+    best = None
+    # side by side: a rung's retries often hold one entry, and its refits are independent (:func:`pmap`)
+    for job, res in zip(jobs, pmap(own, one, jobs)):
+        if res is None:
+            continue
+        route, m2, th2, yh2 = res
+        r2 = rmse((y - yh2)[val])
+        own.say(f"refit {m2.name}{variant_suffix(job[1])} from {route}: validation RMSE {fmt_len(r2)}")
+        if best is None or r2 < best[0]:
+            best = (r2, m2, th2, y - yh2)
     return None if best is None else best[1:]
 
 
