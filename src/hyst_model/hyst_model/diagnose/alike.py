@@ -42,7 +42,8 @@ def alike_refits(own: Setup, entry: tuple, cands: dict) -> tuple[Model, np.ndarr
     names = effect_order(mm)
     vals = _effect_values(mm, tth)
     cfg = {k: v for nm in names for k, v in own_config(mm, nm).items()}
-    jobs: list[tuple[str, dict, dict]] = []  # (route, variant, start) in the order they are judged
+    # (route, variant, base values, effect values) in the order they are judged; no values: from the bare base
+    jobs: list[tuple[str, dict, dict | None, dict | None]] = []
     for x in names:
         c = cands.get(x)
         if x == new or c is None:  # the new effect's configurations were screened on the rung already
@@ -55,18 +56,18 @@ def alike_refits(own: Setup, entry: tuple, cands: dict) -> tuple[Model, np.ndarr
                 base_vals = {k: v for k, v in start.items() if "." not in k}
                 # from that configuration's own values; and from the bare base, every effect from its own data
                 # start (the route that found 3600018)
-                jobs.append(("its own fit", var, {"base": base_vals, "carry": carry}))
-                jobs.append(("the base", var, {}))
+                jobs.append(("its own fit", var, base_vals, carry))
+                jobs.append(("the base", var, None, None))
 
-    def one(job_s: Setup, job: tuple[str, dict, dict]):
-        route, var, start = job
+    def one(job_s: Setup, job: tuple[str, dict, dict | None, dict | None]):
+        route, var, base_vals, carry = job
         job_s.cfg.update(cfg)
         job_s.cfg.update(var)
         try:
-            if start:
+            if base_vals is not None and carry is not None:
                 return route, *guarded_refit(
-                    job_s.base_model, names, job_s.cfg, t, u, y, val, {**start["base"], **start["carry"]},
-                    theta_base=_point(job_s.base_model, start["base"]), carry=start["carry"], fitter=job_s.fit)
+                    job_s.base_model, names, job_s.cfg, t, u, y, val, {**base_vals, **carry},
+                    theta_base=_point(job_s.base_model, base_vals), carry=carry, fitter=job_s.fit)
             return route, *refit(job_s.base_model, names, job_s.cfg, t, u, y, own.th_base, fitter=job_s.fit)
         except (EffectError, FitError):
             return None
