@@ -25,5 +25,8 @@ setup(
             'hyst_reference_node = hyst_control.reference_node:main',
             'hyst_excite_node = hyst_control.excite_node:main',
         ],
+        'hyst.commands': [
+            'excite = hyst_control.cli_excite:register',
+        ],
     },
 )

@@ -107,3 +107,50 @@ def test_bad_start_parameter_is_one_line_and_exit_2(bad):
                        env=dict(os.environ))
     assert p.returncode == 2, (bad, p.stderr)
     assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, p.stderr
+
+
+def test_plays_a_file_written_by_hyst_excite_sample_for_sample(ctx, tmp_path):
+    """``hyst excite --out`` → ``-p file:=`` plays exactly those samples, time-indexed, then rests."""
+    from hyst_model.cli.main import main as hyst
+    f = tmp_path / "u.csv"
+    assert hyst(["excite", "--out", str(f), "--rate", "1000", "--parts", "steps,noise", "--seconds", "0.5",
+                 "--n-steps", "3", "--hold", "0.05", "--seed", "4"]) == 0
+    t_file, u_file = np.loadtxt(f, delimiter=",", skiprows=1, unpack=True)
+    exc = ExciteNode(context=ctx, parameter_overrides=[Parameter("rate", value=1000.0),
+                                                        Parameter("file", value=str(f))])
+    sent = []
+    exc._pub.publish = sent.append  # capture the answers; no graph needed
+    exc._pub.get_subscription_count = lambda: 1
+    try:
+        np.testing.assert_array_equal(exc.excitation.u, u_file)
+        for k in range(len(u_file)):
+            m = JointState()
+            m.header.stamp.sec, m.header.stamp.nanosec = divmod(k * 1_000_000, 1_000_000_000)
+            exc._on_state(m)
+        assert exc.done
+        np.testing.assert_array_equal([c.effort[0] for c in sent[:-1]], u_file[1:])
+        assert sent[-1].effort[0] == exc.spec.rest
+    finally:
+        exc.destroy_node()
+
+
+def _file(tmp_path, rows):
+    f = tmp_path / "bad.csv"
+    f.write_text("t,u\n" + "".join(f"{a},{b}\n" for a, b in rows))
+    return f
+
+
+@pytest.mark.parametrize("rows,why", [
+    ([(k * 1e-3, 0.0 if k in (0, 9) else 200.0) for k in range(10)], "outside 0..150 V"),
+    ([(k * 2e-3, 0.0) for k in range(10)], "sampled every 0.001 s"),
+    ([(k * 1e-3, 50.0) for k in range(10)], "starts at 50 V"),
+    ([(0.0, 0.0), (0.0, 0.0), (0.001, 0.0)], "not strictly increasing"),
+])
+def test_a_file_breaking_a_limit_is_refused_at_start_in_one_line(tmp_path, rows, why):
+    f = _file(tmp_path, rows)
+    exe = str(Path(sys.executable).parent / "hyst_excite_node")
+    p = subprocess.run([exe, "--ros-args", "-p", "rate:=1000.0", "-p", f"file:={f}"], capture_output=True,
+                       text=True, timeout=120, env=dict(os.environ))
+    assert p.returncode == 2, p.stderr
+    line = p.stderr.strip()
+    assert len(line.splitlines()) == 1 and "Traceback" not in line and why in line and str(f) in line, line

@@ -8,10 +8,15 @@ One excitation is a concatenation of parts, each starting and ending at the rest
 ``triangles``  the same with triangles (constant rate: rate-independence check)
 ``multisine``  log-spaced frequencies, random phases (seeded), faded in and out — dynamics and memory
 ``sweep``      a linear chirp ``f_lo`` → ``f_hi``, faded in and out — rate dependence, resonance
+``noise``      seeded Gaussian noise band-limited to ``f_lo`` … ``f_hi`` (FFT mask), faded in and out — what tells
+               a stage mode from a delay and creep from drift (no tone to hide behind); not in the default parts
 
 The rest voltage is ``v_min`` for a unipolar amplifier (PEA, 0–150 V) and the centre of the range for a bipolar
 one (GMA, ±5 V). Every sample is inside ``[v_min, v_max]`` and within ``slew_max·dt`` of the previous one (the
 final rate limiter guarantees it whatever the shapes ask for). Same arguments and seed → same samples.
+
+:func:`from_samples` checks an excitation read from a file (``hyst excite --out`` writes one) against the same
+limits, so the node plays a file only when it could have generated it.
 
 Steps are ramped, not jumped: the discrete MBW model is a per-sample recursion, and a full-range jump within one
 or two samples (what a 10⁵ V/s amplifier passes at 2 kHz) drives it far outside its valid range (measured: the
@@ -26,9 +31,15 @@ import numpy as np
 
 from .errors import ConfigError
 
-__all__ = ["PARTS", "ExcitationSpec", "Excitation", "build_excitation"]
+__all__ = ["PARTS", "DEFAULT_PARTS", "DEFAULT_RATE", "ExcitationSpec", "Excitation", "build_excitation",
+           "from_samples"]
 
-PARTS = ("steps", "sines", "triangles", "multisine", "sweep")
+#: Every part :func:`build_excitation` can play.
+PARTS = ("steps", "sines", "triangles", "multisine", "sweep", "noise")
+#: The parts played when none are named (the excitation earlier sessions measured the lab workflow with).
+DEFAULT_PARTS = ("steps", "sines", "triangles", "multisine", "sweep")
+#: Sample rate (Hz) of ``hyst excite`` and ``hyst_excite_node`` when none is given.
+DEFAULT_RATE = 1000.0
 
 
 @dataclass(frozen=True)
@@ -61,7 +72,7 @@ class ExcitationSpec:
     f_lo, f_hi : float
         Band of the multisine and the sweep (Hz); ``f_hi`` must stay below the Nyquist frequency.
     seconds : float
-        Length of the multisine and of the sweep (s).
+        Length of the multisine, of the sweep and of the noise (s).
     seed : int
         Seed of step levels and multisine phases.
     """
@@ -70,7 +81,7 @@ class ExcitationSpec:
     v_max: float = 150.0
     slew_max: float = math.inf
     dt: float = 5e-4
-    parts: tuple = PARTS
+    parts: tuple = DEFAULT_PARTS
     amplitudes: tuple = (0.3, 0.6, 0.95)
     frequency: float = 2.0
     periods: int = 2
@@ -172,6 +183,19 @@ def _sweep(spec: ExcitationSpec) -> np.ndarray:
     return _banded(spec, np.sin(2.0 * math.pi * (spec.f_lo * t + 0.5 * k * t * t)))
 
 
+def _noise(spec: ExcitationSpec, rng: np.random.Generator) -> np.ndarray:
+    """White Gaussian noise with every FFT bin outside [f_lo, f_hi] zeroed, peak-normalised into the band."""
+    n = int(round(spec.seconds / spec.dt)) + 1
+    spectrum = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, spec.dt)
+    spectrum[(f < spec.f_lo) | (f > spec.f_hi)] = 0.0
+    x = np.fft.irfft(spectrum, n)
+    peak = float(np.max(np.abs(x)))
+    if not peak > 0.0:  # a band holding no FFT bin of so short a part
+        raise ConfigError(f"noise: no frequency of a {spec.seconds:g} s part lies in {spec.f_lo:g}..{spec.f_hi:g} Hz")
+    return _banded(spec, x / peak)
+
+
 def _steps(spec: ExcitationSpec, rng: np.random.Generator) -> np.ndarray:
     levels = np.r_[rng.uniform(spec.v_min, spec.v_max, spec.n_steps), spec.rest]
     n = max(1, int(round(spec.hold / spec.dt)))
@@ -220,6 +244,8 @@ def build_excitation(spec: ExcitationSpec) -> Excitation:
             chunk = [_periodic(spec, a, part == "triangles") for a in spec.amplitudes]
         elif part == "multisine":
             chunk = [_multisine(spec, rng)]
+        elif part == "noise":
+            chunk = [_noise(spec, rng)]
         else:
             chunk = [_sweep(spec)]
         seg = np.concatenate(chunk)
@@ -228,3 +254,56 @@ def build_excitation(spec: ExcitationSpec) -> Excitation:
         k += len(seg) + len(hold)
     u = _rate_limit(np.concatenate(pieces), spec)
     return Excitation(t=spec.dt * np.arange(len(u)), u=u, segments=tuple(segments))
+
+
+def from_samples(t: np.ndarray, u: np.ndarray, spec: ExcitationSpec) -> Excitation:
+    """An excitation given as samples (a file), checked against ``spec``'s limits; nothing is clipped.
+
+    Parameters
+    ----------
+    t, u : ndarray
+        Time (s) and command (V), as read from a ``t,u`` CSV (``hyst excite --out`` writes one).
+    spec : ExcitationSpec
+        Its ``dt``, ``v_min``, ``v_max``, ``slew_max`` and rest voltage are the limits; its parts are unused.
+
+    Returns
+    -------
+    Excitation
+        ``t`` re-based to start at 0 (k·dt), ``u`` as given, one segment named ``file``.
+
+    Raises
+    ------
+    ConfigError
+        Fewer than two samples, a sample period other than ``spec.dt`` (1 % tolerance) or an irregular one, a
+        value outside the range, a step beyond the slew limit, or a start or end more than 0.1 % of the range away
+        from the rest voltage (the player starts from rest and returns to it: a jump there is not ramped).
+    """
+    t = np.asarray(t, dtype=np.float64).ravel()
+    u = np.asarray(u, dtype=np.float64).ravel()
+    if t.size != u.size or t.size < 2:
+        raise ConfigError(f"an excitation needs at least two samples of t and u, got {t.size} and {u.size}")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(u))):
+        raise ConfigError("the excitation holds NaN or infinite values")
+    steps = np.diff(t)
+    if np.any(np.abs(steps - spec.dt) > 0.01 * spec.dt):
+        k = int(np.flatnonzero(np.abs(steps - spec.dt) > 0.01 * spec.dt)[0])
+        raise ConfigError(f"the excitation must be sampled every {spec.dt:g} s ({1 / spec.dt:g} Hz, the stage "
+                          f"rate); between rows {k} and {k + 1} the step is {steps[k]:g} s")
+    tol = 1e-9 * (spec.v_max - spec.v_min)
+    out = np.flatnonzero((u < spec.v_min - tol) | (u > spec.v_max + tol))
+    if out.size:
+        k = int(out[0])
+        raise ConfigError(f"{out.size} sample(s) outside {spec.v_min:g}..{spec.v_max:g} V, the first at "
+                          f"t = {t[k] - t[0]:.6g} s: {u[k]:.6g} V")
+    step = spec.slew_max * spec.dt * (1.0 + 1e-9)
+    fast = np.flatnonzero(np.abs(np.diff(u)) > step)
+    if fast.size:
+        k = int(fast[0])
+        raise ConfigError(f"{fast.size} step(s) faster than the slew limit {spec.slew_max:g} V/s, the first at "
+                          f"t = {t[k + 1] - t[0]:.6g} s: {u[k]:.6g} -> {u[k + 1]:.6g} V")
+    for where, v in (("starts", u[0]), ("ends", u[-1])):
+        if abs(v - spec.rest) > 1e-3 * (spec.v_max - spec.v_min):  # a jump from rest the slew limit may pass
+            # (1e5 V/s is 100 V a sample at 1 kHz) drives the per-sample MBW stage far off (module docstring)
+            raise ConfigError(f"the excitation {where} at {v:.6g} V but the stage rests at {spec.rest:g} V: start "
+                              "and end it at rest (hyst excite writes files that do)")
+    return Excitation(t=spec.dt * np.arange(u.size), u=u.copy(), segments=(("file", 0, u.size),))

@@ -8,8 +8,11 @@ the jump over a gap is faded in over ``step_rise``; a repeated stamp — lockste
 answered with the same value). After the last sample the
 node answers once more with the rest voltage and stops (exit 0). Parameters (all fixed at start): ``profile``,
 ``rate``, ``v_min``, ``v_max``, ``slew_max``, ``parts``, ``amplitudes``, ``frequency``, ``periods``, ``n_steps``,
-``hold``, ``step_rise``, ``f_lo``, ``f_hi``, ``seconds``, ``seed`` (see :mod:`hyst_control.excitation`) and
-``wait_for_subscribers`` (no answer until ``/stage/command`` has that many subscribers: 2 with a recorder).
+``hold``, ``step_rise``, ``f_lo``, ``f_hi``, ``seconds``, ``seed`` (see :mod:`hyst_control.excitation`),
+``file`` (play a ``t,u`` CSV in s, V instead — ``hyst excite --out`` writes one; it must be sampled at ``rate``,
+stay inside ``v_min``..``v_max`` and ``slew_max`` and start and end at rest, or the node refuses to start, saying
+which sample breaks which limit) and ``wait_for_subscribers`` (no answer until ``/stage/command`` has that many
+subscribers: 2 with a recorder).
 """
 from __future__ import annotations
 
@@ -22,7 +25,7 @@ from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
 
 from .errors import ControlError
-from .excitation import PARTS, ExcitationSpec, build_excitation
+from .excitation import DEFAULT_RATE, PARTS, Excitation, ExcitationSpec, build_excitation, from_samples
 
 __all__ = ["ExciteNode", "main"]
 
@@ -34,7 +37,8 @@ class ExciteNode(AtomicParametersNode):
         super().__init__("hyst_excite", **kwargs)
         self._declare()
         self.spec = self._read()
-        self.excitation = build_excitation(self.spec)
+        self.source = str(self.get_parameter("file").value).strip()
+        self.excitation = _from_file(self.source, self.spec) if self.source else build_excitation(self.spec)
         self.done = False
         self._t_first: float | None = None  # stamp (s) of the first state answered
         self._k_last: int | None = None     # index of the last sample answered
@@ -46,8 +50,9 @@ class ExciteNode(AtomicParametersNode):
         self._pub = self.create_publisher(JointState, "/stage/command", 10000)  # as the controller's: see there
         self.create_subscription(JointState, "/stage/state", self._on_state, 1000)
         ex = self.excitation
+        what = f"file {self.source}" if self.source else ", ".join(self.spec.parts)
         self.get_logger().info(
-            f"excitation ready: {', '.join(self.spec.parts)}, {ex.duration:.2f} s at {1 / self.spec.dt:g} Hz, "
+            f"excitation ready: {what}, {ex.duration:.2f} s at {1 / self.spec.dt:g} Hz, "
             f"{ex.u.min():.3g}..{ex.u.max():.3g} V")
 
     def _declare(self) -> None:
@@ -59,7 +64,7 @@ class ExciteNode(AtomicParametersNode):
             raise ControlError(f"profile must be pea or gma, got {prof!r}")
         lim = GMA_LIMITS if prof == "gma" else PEA_LIMITS
         s = ExcitationSpec()
-        d("rate", 1000.0, ParameterDescriptor(description="stage sample rate (Hz)",
+        d("rate", DEFAULT_RATE, ParameterDescriptor(description="stage sample rate (Hz)",
                                               floating_point_range=fp_range(1, 5000), **ro))
         d("v_min", lim.v_min, ParameterDescriptor(description="lowest command (V), inside the profile",
                                                   floating_point_range=fp_range(lim.v_min, lim.v_max), **ro))
@@ -85,8 +90,11 @@ class ExciteNode(AtomicParametersNode):
         d("wait_for_subscribers", 1, ParameterDescriptor(
             description="answer no state until /stage/command has this many subscribers (stage + recorder = 2), "
                         "so a recorder never misses the first commands", integer_range=int_range(1, 100), **ro))
-        d("seed", 0, ParameterDescriptor(description="seed of step levels and multisine phases",
+        d("seed", 0, ParameterDescriptor(description="seed of step levels, multisine phases and noise",
                                          integer_range=int_range(0, 2**31 - 1), **ro))
+        d("file", "", ParameterDescriptor(
+            description="play this t,u CSV (s, V; e.g. from hyst excite --out) instead of generating parts; it must "
+                        "be sampled at rate and keep the range and slew limits", **ro))
 
     def _read(self) -> ExcitationSpec:
         def g(name):
@@ -147,6 +155,20 @@ class ExciteNode(AtomicParametersNode):
         t0, off = self._resume
         x = (t - t0) / self.spec.step_rise if self.spec.step_rise > 0 else 1.0
         return uk + off * 0.5 * (1.0 + math.cos(math.pi * x)) if 0.0 <= x < 1.0 else uk
+
+
+def _from_file(path: str, spec: ExcitationSpec) -> Excitation:
+    """The excitation of a ``t,u`` CSV, checked against the node's limits (one error with the reason)."""
+    from hyst_model.errors import HystError
+    from hyst_model.io.csvio import read_input_csv
+    try:
+        t, u = read_input_csv(path)
+    except (HystError, OSError) as err:
+        raise ControlError(f"file {path}: {err}") from err
+    try:
+        return from_samples(t, u, spec)
+    except ControlError as err:
+        raise ControlError(f"file {path}: {err}") from err
 
 
 def _flush(node: "ExciteNode", stopped: bool) -> None:

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from hyst_control.errors import ConfigError
-from hyst_control.excitation import PARTS, ExcitationSpec, build_excitation
+from hyst_control.excitation import DEFAULT_PARTS, PARTS, ExcitationSpec, build_excitation, from_samples
 
 
 @pytest.mark.parametrize("kw", [dict(), dict(v_min=-5.0, v_max=5.0, slew_max=1e4),
@@ -14,7 +14,7 @@ def test_range_slew_rest_and_parts(kw):
     assert np.all(ex.u >= spec.v_min) and np.all(ex.u <= spec.v_max)
     assert np.max(np.abs(np.diff(ex.u))) <= spec.slew_max * spec.dt * (1 + 1e-12)
     assert ex.u[0] == spec.rest and ex.u[-1] == pytest.approx(spec.rest)
-    assert [s[0] for s in ex.segments] == list(PARTS)
+    assert [s[0] for s in ex.segments] == list(DEFAULT_PARTS)
     assert np.allclose(np.diff(ex.t), spec.dt)
     # sines reach the largest band (within the slew limit's corner rounding)
     name, a, b = ex.segments[1]
@@ -52,3 +52,58 @@ def test_sweep_covers_its_band():
 def test_bad_specs_refused(kw):
     with pytest.raises(ConfigError):
         ExcitationSpec(**kw)
+
+
+def test_noise_is_seeded_band_limited_and_inside_the_limits():
+    spec = ExcitationSpec(parts=("noise",), f_lo=5.0, f_hi=80.0, seconds=4.0, dt=5e-4, hold=0.0, slew_max=1e5,
+                          seed=11)
+    ex = build_excitation(spec)
+    assert [s[0] for s in ex.segments] == ["noise"]
+    assert np.all(ex.u >= spec.v_min) and np.all(ex.u <= spec.v_max)
+    assert np.max(np.abs(np.diff(ex.u))) <= spec.slew_max * spec.dt * (1 + 1e-12)
+    _, a, b = ex.segments[0]
+    m = int(0.4 / spec.dt)  # between the fades from and back to rest (a slow ramp to the band's centre)
+    x = ex.u[a + m:b - m] - ex.u[a + m:b - m].mean()
+    f = np.fft.rfftfreq(len(x), spec.dt)
+    p = np.abs(np.fft.rfft(x)) ** 2
+    assert p[(f >= 4.0) & (f <= 81.0)].sum() > 0.97 * p.sum()
+    assert p[f > 100.0].sum() < 1e-3 * p.sum()
+    assert np.ptp(x) > 0.5 * 0.95 * 150.0  # peak-normalised into the largest band: not a whisper
+    assert np.array_equal(ex.u, build_excitation(spec).u)
+    assert not np.array_equal(ex.u, build_excitation(ExcitationSpec(**{**spec.__dict__, "seed": 12})).u)
+
+
+def test_default_parts_are_the_five_measured_ones_and_noise_is_asked_for():
+    assert "noise" in PARTS and "noise" not in ExcitationSpec().parts
+    assert [s[0] for s in build_excitation(ExcitationSpec()).segments] == list(DEFAULT_PARTS)
+
+
+def test_noise_band_without_a_bin_is_refused():
+    with pytest.raises(ConfigError, match="no frequency"):
+        build_excitation(ExcitationSpec(parts=("noise",), f_lo=1.0, f_hi=1.1, seconds=0.01, dt=1e-3))
+
+
+def test_samples_of_a_generated_excitation_are_accepted_unchanged():
+    spec = ExcitationSpec(v_min=-5.0, v_max=5.0, slew_max=1e4, dt=1e-3, parts=("steps", "noise"), seed=2)
+    ex = build_excitation(spec)
+    got = from_samples(ex.t + 3.0, ex.u, spec)  # a file's clock need not start at 0
+    assert np.array_equal(got.u, ex.u) and np.allclose(got.t, ex.t) and got.segments == (("file", 0, ex.u.size),)
+
+
+@pytest.mark.parametrize("change,match", [
+    (lambda t, u: (t * 2, u), "sampled every"),
+    (lambda t, u: (np.r_[t[:10], t[10:] + 0.5e-3], u), "between rows 9 and 10"),
+    (lambda t, u: (t, np.where(np.arange(u.size) == 50, 151.0, u)), "outside 0..150 V"),
+    (lambda t, u: (t, np.where(np.arange(u.size) == 50, u[49] + 80.0, u)), "faster than the slew"),
+    (lambda t, u: (t[:400], u[:400]), "ends at"),   # cut while holding the first level
+    (lambda t, u: (t[400:], u[400:]), "starts at"),
+    (lambda t, u: (t[:1], u[:1]), "at least two"),
+    (lambda t, u: (t, np.where(np.arange(u.size) == 5, np.nan, u)), "NaN"),
+])
+def test_samples_breaking_a_limit_are_refused_with_the_reason(change, match):
+    spec = ExcitationSpec(slew_max=1e4, dt=1e-3, parts=("steps",), n_steps=3, seed=1)  # 10 V a sample
+    ex = build_excitation(spec)
+    assert ex.u[400] > 10.0  # the first step level (seed 1), held from sample 250 + 5
+    t, u = change(ex.t.copy(), ex.u.copy())
+    with pytest.raises(ConfigError, match=match):
+        from_samples(t, u, spec)

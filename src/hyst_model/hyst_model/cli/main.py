@@ -2,7 +2,8 @@
 
 Subcommands register themselves through the entry-point group ``hyst.commands``; each entry point names a
 function ``register(subparsers) -> None`` that adds one subparser and sets ``func`` (``func(args) -> int``)
-as its default. hyst_model registers fit, simulate, compare, diagnose; hyst_control registers track and demo.
+as its default. hyst_model registers fit, simulate, compare, diagnose; hyst_control excite; hyst_bringup
+track and demo.
 A :class:`~hyst_model.errors.HystError` becomes one clear message on stderr and exit code 2 — never a
 traceback wall.
 """

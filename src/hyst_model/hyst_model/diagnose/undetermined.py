@@ -116,4 +116,4 @@ def sentence(items: list[Undetermined], noise: float) -> str:
                          f"({x.rmse / noise:.2f}× the noise floor)" for x in alike)
         parts.append(f"this record does not tell {alike[0].against} from: {what}")
     return ("; ".join(parts) + "; record steps with holds, band-limited noise or a sweep over the range "
-            "(hyst excite) to tell them apart")
+            "(hyst excite --parts steps,noise,sweep writes one; hyst_excite_node plays it) to tell them apart")

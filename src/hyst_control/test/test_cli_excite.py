@@ -1,0 +1,57 @@
+"""``hyst excite``: writes the excitation the node would play as a t,u CSV; refuses bad input in one line."""
+import json
+
+import numpy as np
+import pytest
+
+from hyst_control.excitation import ExcitationSpec, build_excitation, from_samples
+from hyst_model.cli.main import main as hyst
+from hyst_model.io.csvio import read_input_csv
+
+
+def test_writes_the_generated_excitation_and_describes_it(tmp_path, capsys):
+    out = tmp_path / "u.csv"
+    rc = hyst(["excite", "--out", str(out), "--profile", "gma", "--rate", "2000", "--parts", "steps,noise,sweep",
+               "--seed", "5", "--json"])
+    assert rc == 0
+    desc = json.loads(capsys.readouterr().out)
+    t, u = read_input_csv(out)
+    ex = build_excitation(ExcitationSpec(v_min=-5.0, v_max=5.0, slew_max=_gma_slew(), dt=1 / 2000,
+                                         parts=("steps", "noise", "sweep"), seed=5))
+    np.testing.assert_allclose(u, ex.u, rtol=1e-9, atol=1e-9)  # %.10g in the file
+    np.testing.assert_allclose(t, ex.t, rtol=1e-9, atol=1e-12)
+    assert desc["samples"] == u.size and desc["rate"] == 2000.0 and desc["rest"] == 0.0
+    assert [s["part"] for s in desc["segments"]] == ["steps", "noise", "sweep"]
+    assert -5.0 <= desc["u_min"] < 0.0 < desc["u_max"] <= 5.0
+    # what the node accepts: the file's own samples pass the player's checks unchanged
+    assert np.array_equal(from_samples(t, u, ExcitationSpec(v_min=-5.0, v_max=5.0, slew_max=_gma_slew(),
+                                                            dt=1 / 2000)).u, u)
+
+
+def _gma_slew() -> float:
+    from hyst_common.profiles import GMA_LIMITS
+    return float(min(GMA_LIMITS.slew_max, 1e9))
+
+
+@pytest.mark.parametrize("extra,why", [
+    (["--parts", "steps,chirp"], "unknown excitation part"),
+    (["--v-max", "200"], "leave the pea amplifier's range"),
+    (["--f-hi", "900", "--rate", "1000"], "Nyquist"),
+    (["--amplitudes", "0.5,x"], "comma list of numbers"),
+    (["--rate", "0"], "--rate"),
+])
+def test_bad_arguments_are_one_line_exit_2_and_write_nothing(tmp_path, capsys, extra, why):
+    out = tmp_path / "u.csv"
+    assert hyst(["excite", "--out", str(out), *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and why in err, err
+    assert not out.exists()
+
+
+def test_an_existing_file_is_kept_without_force(tmp_path, capsys):
+    out = tmp_path / "u.csv"
+    out.write_text("mine\n")
+    assert hyst(["excite", "--out", str(out)]) == 2
+    assert out.read_text() == "mine\n" and "--force" in capsys.readouterr().err
+    assert hyst(["excite", "--out", str(out), "--force", "--parts", "steps"]) == 0
+    assert out.read_text().startswith("t,u\n")
