@@ -11,7 +11,7 @@ from hyst_model.diagnose.undetermined import CONTRIBUTION
 from hyst_sim.generator import generate_case
 
 
-def test_a_delay_the_base_takes_on_sines_is_said_to_be_undetermined():
+def test_a_delay_the_base_takes_on_sines_is_said_to_be_undetermined(tmp_path):
     """GMA stage, a fractional input delay, excited by a few sines (case 2000149, 29× the noise): the MBW's memory
     terms take the phase, the base validates at the noise floor and the answer is "none" — but on a fresh record
     the base alone errs 14× more than with the delay. The note names the delay and its fitted size."""
@@ -25,6 +25,30 @@ def test_a_delay_the_base_takes_on_sines_is_said_to_be_undetermined():
     assert "does not determine delay" in d.explanation and "hyst excite" in d.explanation
     js = json.loads(json.dumps(d.to_json()))
     assert any(x["effect"] == "delay" for x in js["undetermined"])
+    _the_advised_command_runs(d.explanation, c, tmp_path)
+
+
+def _the_advised_command_runs(explanation, c, tmp_path):
+    """The ``hyst excite`` command the note gives runs as printed and writes an excitation at the record's rate
+    and within its reach, which hyst_excite_node's default limits for that profile accept."""
+    import numpy as np
+    from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
+    from hyst_control.excitation import ExcitationSpec, from_samples
+    from hyst_model.cli.main import main as hyst
+    from hyst_model.io.csvio import read_input_csv
+    words = explanation[explanation.index("hyst excite"):].split(" writes one")[0].split()
+    assert words[words.index("--out") + 1] == "excite.csv"
+    out = tmp_path / "excite.csv"
+    words[words.index("--out") + 1] = str(out)
+    assert hyst(words[1:]) == 0, words
+    t, u = read_input_csv(out)
+    dt = float(c.t[1] - c.t[0])
+    assert np.allclose(np.diff(t), dt)
+    reach = max(abs(c.u.min()), abs(c.u.max()))
+    assert np.max(np.abs(u)) <= reach and np.max(np.abs(u)) > 0.5 * reach
+    lim = GMA_LIMITS if c.u.min() < 0 else PEA_LIMITS
+    from_samples(t, u, ExcitationSpec(v_min=lim.v_min, v_max=lim.v_max, slew_max=float(min(lim.slew_max, 1e9)),
+                                      dt=dt))
 
 
 @pytest.mark.parametrize("seed", [2700002, 2000002])

@@ -211,7 +211,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         expl = f"{expl}; {caution}"
     und = undetermined(s, full, cands, list(chosen))                 # 5. what the record cannot tell apart
     if und:
-        expl = f"{expl}; {sentence(und, noise)}"
+        expl = f"{expl}; {sentence(und, noise, dt, (float(np.min(u)), float(np.max(u))))}"
     return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
                      time.perf_counter() - t0, models, unexplained, caution, und)
 

@@ -23,7 +23,7 @@ from .refit import paired_t, rmse
 from .setup import Setup
 from .stages import validate_alike
 
-__all__ = ["CONTRIBUTION", "Undetermined", "undetermined", "sentence"]
+__all__ = ["CONTRIBUTION", "Undetermined", "undetermined", "sentence", "excite_command"]
 
 #: An effect whose part of the fitted model's output (the model minus its base, same parameters) is at least this
 #: many times the noise floor RMS would be seen by a record that could tell; validating alike with the base, it is
@@ -97,8 +97,10 @@ def _values(params: dict, effect: str, at_most: int = 3) -> str:
     return shown + (", ..." if len(items) > at_most else "")
 
 
-def sentence(items: list[Undetermined], noise: float) -> str:
-    """The note in words ('' for none): what the record does not determine, and what to record to tell."""
+def sentence(items: list[Undetermined], noise: float, dt: float | None = None,
+             u_range: tuple[float, float] | None = None) -> str:
+    """The note in words ('' for none): what the record does not determine, and what to record to tell — the
+    ``hyst excite`` command for a record of this rate and input range (:func:`excite_command`)."""
     if not items:
         return ""
     alone = [x for x in items if x.against == "the base"]
@@ -115,5 +117,23 @@ def sentence(items: list[Undetermined], noise: float) -> str:
         what = "; ".join(f"{x.effect} ({_values(x.params, x.effect)}) validates at {fmt_len(x.rmse)} "
                          f"({x.rmse / noise:.2f}× the noise floor)" for x in alike)
         parts.append(f"this record does not tell {alike[0].against} from: {what}")
-    return ("; ".join(parts) + "; record steps with holds, band-limited noise or a sweep over the range "
-            "(hyst excite --parts steps,noise,sweep writes one; hyst_excite_node plays it) to tell them apart")
+    return ("; ".join(parts) + "; record steps with holds, band-limited noise or a sweep over the range to tell "
+            f"them apart ({excite_command(dt, u_range)} writes one; hyst_excite_node -p file:= plays it)")
+
+
+def excite_command(dt: float | None, u_range: tuple[float, float] | None) -> str:
+    """The ``hyst excite`` command for a record like this one: its rate and, where the record's input lies inside
+    an amplifier profile's range (PEA 0–150 V, GMA ±5 V), that profile and the record's reach (a stage is excited
+    where it was identified), keeping the profile's rest voltage — 0 V, from which ``hyst_excite_node`` starts — so
+    the node plays the file with its defaults. Without them, the generic command."""
+    cmd = "hyst excite --parts steps,noise,sweep"
+    if dt is not None and np.isfinite(dt) and dt >= 1e-5:
+        cmd += f" --rate {1.0 / dt:.6g}"
+    if u_range is not None:
+        lo, hi = (float(v) for v in u_range)
+        reach = 0.9999 * max(abs(lo), abs(hi))  # inward by 0.01 %: a printed figure rounded up would leave it
+        if 0.0 <= lo < hi <= 150.0:
+            cmd += f" --profile pea --v-max {0.9999 * hi:.6g}"
+        elif -5.0 <= lo < 0.0 < hi <= 5.0:
+            cmd += f" --profile gma --v-min {-reach:.6g} --v-max {reach:.6g}"
+    return cmd + " --out excite.csv"
