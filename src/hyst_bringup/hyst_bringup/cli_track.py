@@ -215,7 +215,8 @@ def run(args: argparse.Namespace) -> int:
         json.dump(out, sys.stdout)
         sys.stdout.write("\n")
     else:
+        pos = f" (stage position {res.rmse_position * 1e6:.4f} um)" if res.x is not None else ""
         print(f"{args.algorithm} tracking {args.reference} for {args.seconds:g} s at {args.rate:g} Hz: "
-              f"RMSE {res.rmse * 1e6:.4f} um, MAE {res.mae * 1e6:.4f} um, "
+              f"RMSE {res.rmse * 1e6:.4f} um{pos}, MAE {res.mae * 1e6:.4f} um, "
               f"command {out['u_min']:.1f}..{out['u_max']:.1f} V")
     return 0

@@ -107,9 +107,14 @@ class LoopResult:
         return bool(np.all(np.isfinite(self.y)) and np.all(np.isfinite(self.u)))
 
     def summary(self) -> dict:
-        return {"algorithm": self.algorithm, "reference": self.reference, "rate": self.rate,
-                "samples": int(self.t.size), "skip": self.skip, "rmse": self.rmse, "mae": self.mae,
-                "u_min": float(np.min(self.u)), "u_max": float(np.max(self.u)), "finite": self.finite}
+        """Metrics as plain values (m, V); ``rmse_position`` where the plant knows its true position (a
+        simulation: a sensor's own drift is in the reading, ``rmse``, not in the position)."""
+        out = {"algorithm": self.algorithm, "reference": self.reference, "rate": self.rate,
+               "samples": int(self.t.size), "skip": self.skip, "rmse": self.rmse, "mae": self.mae,
+               "u_min": float(np.min(self.u)), "u_max": float(np.max(self.u)), "finite": self.finite}
+        if self.x is not None:
+            out["rmse_position"] = self.rmse_position
+        return out
 
 
 def run_closed_loop(controller: BaseController, reference: Reference | str, seconds: float = 1.0,

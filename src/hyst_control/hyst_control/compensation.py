@@ -17,7 +17,10 @@ the effects enter around them (:mod:`hyst_model.effects.online`):
   minus the whole model's prediction plus the base's, each resonance inverse driven by the prediction of what lies
   inside it, and creep outside a delay inverted with its lags at the previewed sample;
 * a drifting offset (input-independent, so nothing to invert) is estimated from the sensor by a disturbance
-  observer and removed from measurement and reference (the open-loop inverse reads no sensor: it cannot);
+  observer and removed from measurement and reference, so the reading follows the reference (``drift.side:
+  stage``, the default: the stage moves; the open-loop inverse reads no sensor and cannot follow it) — or from the
+  measurement only, so the stage's position does (``sensor``: the sensor's offset drifts; the open-loop inverse
+  needs no reading for it);
 * an effect without a per-sample form (the feedback structure of dynamics; a user effect without
   :meth:`~hyst_model.effects.Effect.online`) is listed in
   :attr:`Compensation.unused` with the reason, which the node logs and puts on ``/diagnostics``: never dropped

@@ -104,21 +104,23 @@ def test_effects_without_online_form_say_why():
 
 
 def test_drift_observer_estimates_the_offset_from_the_sensor():
-    """A ramp plus a step of the sensor offset on a perfect base model: the estimate follows it with the
-    observer's lag (r·τ on a ramp), target and measurement both lose it, and a bad sample is refused."""
+    """A ramp plus a step of the sensor offset on a perfect base model: the estimate follows it without a steady
+    lag (an offset-and-rate filter; a first-order observer kept r·τ = 2 nm behind this ramp), target and
+    measurement both lose it, and a bad sample is refused."""
     from hyst_model.effects.drift import OBSERVER_TAU, DriftObserver
 
     t, u, x = _record()
     d = 40e-9 * t + np.where(t > 1.0, 30e-9, 0.0)  # 40 nm/s and a 30 nm jump at 1 s
     obs = EFFECTS["drift"](CFG).online(np.zeros(5), base=lambda: MBWStepper(pea_default()))
-    assert isinstance(obs, DriftObserver) and obs.needs_sensor
+    assert isinstance(obs, DriftObserver) and obs.needs_sensor and obs.follow_reading
     obs.reset(float(x[0] + d[0]), float(u[0]))
     est = np.empty_like(t)
     for k, (yk, uk) in enumerate(zip(x + d, u)):
         obs.observe(obs.measure(float(yk), float(uk)), float(uk))
         est[k] = obs.offset
     late = t > 1.0 + 8 * OBSERVER_TAU  # settled after the jump
-    np.testing.assert_allclose(est[late], d[late] - 40e-9 * OBSERVER_TAU, atol=0.3e-9)
+    np.testing.assert_allclose(est[late], d[late], atol=0.3e-9)
+    assert abs(obs.slope * 2000.0 - 40e-9) < 1e-9  # the ramp's rate, per sample at 2 kHz
     assert obs.target(5e-6, 75.0) == pytest.approx(5e-6 - obs.offset)
     before = obs.offset
     obs.measure(float("nan"), 75.0)
@@ -228,3 +230,26 @@ def test_static_forward_predictions_are_the_effects_own_maps(name, cfg, theta):
     inside = (y > lo) & (y < hi)
     assert inside.mean() > 0.8
     np.testing.assert_allclose(back[inside], y[inside], rtol=0, atol=1e-12)
+
+
+def test_drift_side_says_what_drifts_and_only_the_sensor_side_leaves_the_reference_alone():
+    """``drift.side``: ``stage`` (default, what a file without the key means) removes the estimate from measurement
+    and reference (the reading follows the reference); ``sensor`` from the measurement only (the position does),
+    and needs no reading in open loop. Anything else is refused; identification is the same for both."""
+    from hyst_model.effects.drift import DriftObserver
+    from hyst_model.errors import EffectError
+
+    stage, sensor = EFFECTS["drift"](CFG), EFFECTS["drift"](dict(CFG, **{"drift.side": "sensor"}))
+    assert stage.config()["side"] == "stage" and sensor.config()["side"] == "sensor"
+    t, u, x = _record()
+    th = np.array([1e-9, -2e-9, 3e-9, 0.0, 5e-9])
+    np.testing.assert_array_equal(stage.output(th, t, u, x), sensor.output(th, t, u, x))
+    obs = sensor.online(np.zeros(5), base=lambda: MBWStepper(pea_default()))
+    assert isinstance(obs, DriftObserver) and not obs.follow_reading and not obs.needs_sensor
+    obs.reset(float(x[0]), float(u[0]))
+    for yk, uk in zip(x + 50e-9, u):  # a 50 nm sensor offset (the record's own start settles within 1 s)
+        obs.observe(obs.measure(float(yk), float(uk)), float(uk))
+    assert obs.offset == pytest.approx(50e-9, abs=0.3e-9)
+    assert obs.target(5e-6, 75.0) == 5e-6 and obs.measure(6e-6, 75.0) == pytest.approx(6e-6 - obs.offset)
+    with pytest.raises(EffectError, match="drift.side must be one of stage, sensor"):
+        EFFECTS["drift"](dict(CFG, **{"drift.side": "amplifier"}))
