@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from hyst_control.compensation import Compensated, effect_parameters, plan_compensation
@@ -70,9 +71,10 @@ def test_no_effects_leaves_the_law_unwrapped():
     assert not isinstance(c, Compensated)
 
 
-def _track(alg, plant_effects, comp, ref="sine:1", seconds=1.5):
+def _track(alg, plant_effects, comp, ref="sine:1", seconds=1.5, record=()):
     c = make_controller(alg, pea_default(), DT, compensation=comp)
-    return run_closed_loop(c, ref, seconds, plant=default_plant(RATE, seed=3, **plant_effects), settle=0.5)
+    return run_closed_loop(c, ref, seconds, plant=default_plant(RATE, seed=3, **plant_effects), settle=0.5,
+                           record=record)
 
 
 @pytest.mark.parametrize("alg", ["dppc", "dmrac", "open_loop"])
@@ -137,12 +139,20 @@ def test_a_sensor_side_drift_puts_the_stage_position_on_the_reference(alg):
     measured 10 nm of 580 nm, against 1.8 nm on the drift-free stage)."""
     plant = {"drift": 2e-7}
     clean = _track(alg, {}, None, seconds=3.0)
-    stage = _track(alg, plant, _plan(["drift"]), seconds=3.0)
-    sensor = _track(alg, plant, _plan(["drift"], **{"drift__side": "sensor"}), seconds=3.0)
+    keys = ("error", "drift", "position_error")
+    stage = _track(alg, plant, _plan(["drift"]), seconds=3.0, record=keys)
+    sensor = _track(alg, plant, _plan(["drift"], **{"drift__side": "sensor"}), seconds=3.0, record=keys)
     assert sensor.finite and stage.finite and sensor.x is not None and stage.x is not None
     assert sensor.rmse_position < 0.05 * stage.rmse_position, (sensor.rmse_position, stage.rmse_position)
     assert sensor.rmse_position < 0.05 * sensor.rmse, (sensor.rmse_position, sensor.rmse)  # the reading drifts
     assert stage.rmse < 1.5 * clean.rmse, (stage.rmse, clean.rmse)  # the default keeps the reading on it
+    # /controller/state names the estimate and, for a drifting sensor, the position's error
+    st, ss = stage.states, sensor.states
+    assert np.all(np.isnan(st["position_error"])) and not np.any(np.isnan(ss["position_error"]))
+    late = slice(-1000, None)
+    assert abs(ss["drift"][-1]) > 100e-9 and abs(st["drift"][-1]) > 100e-9
+    assert np.sqrt(np.mean(np.square(ss["position_error"][late]))) < 0.1 * np.sqrt(
+        np.mean(np.square(ss["error"][late])))
 
 
 def test_a_sensor_side_drift_needs_no_reading_in_open_loop_and_a_bad_side_is_refused():

@@ -99,6 +99,11 @@ class Compensated:
         s = dict(self.inner.state())
         s["error"] = self._y_prev - self._r_aim  # the published error is on the measured output, in m
         s["limited"] = float(self.comp.limited)
+        drift = self.comp.drift()
+        if drift is not None:
+            s["drift"] = drift[0]
+            if not drift[1]:  # a drifting sensor: what the stage's position is off (the reading minus the offset)
+                s["position_error"] = self._y_prev - drift[0] - self._r_aim
         return s
 
 

@@ -167,6 +167,14 @@ class Compensation:
             r = e.target(r, u)
         return r
 
+    def drift(self) -> tuple[float, bool] | None:
+        """The drift observer's offset estimate (m) and whether the reading follows the reference (``drift.side:
+        stage``) — None without a drift effect."""
+        for e in self.used:
+            if e.name == "drift" and hasattr(e, "offset"):
+                return float(e.offset), bool(getattr(e, "follow_reading", True))
+        return None
+
     @property
     def sensor_only(self) -> list[str]:
         """Effects estimated from the sensor (drift): the feedback laws use them, the open-loop inverse cannot."""

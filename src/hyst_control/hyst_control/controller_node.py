@@ -3,7 +3,8 @@
 Subscribes ``/stage/state`` (``position[0]`` m, ``effort[0]`` applied V) and ``/stage/reference``
 (``position[0]`` m, ``velocity[0]`` m/s); publishes ``/stage/command`` (``effort[0]`` V, ``header.stamp`` = the
 stamp of the state sample it answers), ``/controller/state`` (named scalars: error, epsilon, lambda, nu, estimates
-... in ``position``) and ``/diagnostics``.
+..., with a drift effect ``drift`` and for ``drift.side: sensor`` ``position_error``, in ``position``) and
+``/diagnostics``.
 
 The command answering the state stamped t_k acts at the next sample, so the reference is evaluated at
 t_k + 1/rate: the newest reference sample is extrapolated with its rate from its own stamp (at most 50 ms; both
