@@ -157,6 +157,21 @@ def test_effects_of_a_params_file_are_compensated_or_reported_never_silently_dro
     assert node2._unused == "" and node2._compensating == []
 
 
+def test_a_drifting_sensor_is_said_in_the_params_file_and_a_bad_side_is_refused(harness, tmp_path):
+    """``drift.side: sensor``: compensated by every law (open loop needs no reading for a drifting sensor, so it is
+    not reported as uncompensated); a side the effect does not know is refused with the reason."""
+    p = tmp_path / "stage.yaml"
+    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      effects: [drift]\n"
+                 "      zeta1: 0.45\n      y_scale: 5.0e-06\n      dt: 0.001\n"
+                 "      drift:\n        side: sensor\n        c1: 1.0e-8\n")
+    node, peer, ex, pub, got = harness("--params-file", str(p))
+    assert node._compensating == ["drift"] and "open_loop does not compensate drift" not in node._unused
+    assert dict(node._settings.effect_values)["drift.side"] == "sensor"
+    res = node.set_parameters([Parameter("model.drift.side", value="amplifier")])[0]
+    assert not res.successful and "drift.side must be one of stage, sensor" in res.reason
+    assert node.get_parameter("model.drift.side").value == "sensor"
+
+
 def test_an_effect_the_laws_cannot_invert_is_refused_with_a_reason(harness, tmp_path):
     p = tmp_path / "stage.yaml"
     p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      effects: [creep]\n"
