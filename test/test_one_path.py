@@ -42,7 +42,9 @@ def test_config_must_name_a_listed_effect(tmp_path, capsys):
     np.savetxt(csv, np.c_[t, u, 1e-7 * u], delimiter=",", header="t,u,y", comments="")
     for bad in (["--effects", "creep", "--config", "dynamics.structure=series"],
                 ["--effects", "delay", "--config", "delay.side=sideways"],
-                ["--effects", "delay", "--config", "side=input"]):
+                ["--effects", "delay", "--config", "side=input"],
+                ["--effects", "drift", "--config", "drift.sid=sensor"],       # a typo ran the default silently
+                ["--effects", "dynamics", "--config", "dynamics.structur=feedback"]):
         try:
             rc = main(["fit", str(csv), "--quiet"] + bad)
         except SystemExit as ex:
@@ -50,3 +52,5 @@ def test_config_must_name_a_listed_effect(tmp_path, capsys):
         assert rc == 2, bad
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "Traceback" not in err, err
+        if "sid=" in bad[-1] or "structur=" in bad[-1]:
+            assert "has no setting" in err and "its settings are" in err, err

@@ -61,13 +61,16 @@ def build_model(base: str, effects: Sequence[str] = (), config: Mapping[str, obj
 def parse_effect_config(items: Sequence[str], effects: Sequence[str]) -> dict:
     """``["dynamics.structure=feedback"]`` → ``{"dynamics.structure": "feedback"}`` (numbers as floats).
 
-    Keys must belong to one of the listed effects (``<effect>.<key>``); the effect itself checks the value.
-    ``hyst fit --config`` and the identification node's ``effect_config`` read their items here.
+    Keys must belong to one of the listed effects (``<effect>.<key>``) and be one of its settings (what its
+    :meth:`~hyst_model.effects.Effect.config` stores in a params file, in any of its variants): a mistyped key was
+    silently ignored and the effect ran with its default (``drift.sid=sensor``). The effect itself checks the value.
+    ``hyst fit --config``, ``hyst diagnose --config`` and the identification node's ``effect_config`` read their
+    items here.
 
     Raises
     ------
     DataError
-        An item that is not ``EFFECT.KEY=VALUE`` or names an effect not listed.
+        An item that is not ``EFFECT.KEY=VALUE``, names an effect not listed, or a setting the effect has not.
     """
     out: dict = {}
     for item in items:
@@ -78,11 +81,32 @@ def parse_effect_config(items: Sequence[str], effects: Sequence[str]) -> dict:
             raise DataError(f"--config needs EFFECT.KEY=VALUE, e.g. dynamics.structure=feedback, got {item!r}")
         if name not in effects:
             raise DataError(f"--config {key}: effect {name!r} is not in --effects ({', '.join(effects) or 'none'})")
+        known = _settings(name)
+        if known is not None and key.split(".", 1)[1] not in known:
+            raise DataError(f"--config {key}: {name} has no setting {key.split('.', 1)[1]!r}; its settings are "
+                            f"{', '.join(sorted(known)) or 'none'}")
         try:
             out[key] = float(value)
         except ValueError:
             out[key] = value
     return out
+
+
+def _settings(name: str) -> set[str] | None:
+    """The configuration keys (local names) of effect ``name`` over its variants; None when they cannot be read
+    (an effect this process does not know, or whose constructor needs more than the scales)."""
+    from .effects import EFFECTS
+    cls = EFFECTS.get(name)
+    if cls is None:
+        return None
+    base = {"dt": 1e-3, "u_scale": 1.0, "y_scale": 1e-6}
+    keys: set[str] = set()
+    try:
+        for var in [{}] + list(cls.variants() if hasattr(cls, "variants") else []):
+            keys |= set(cls({**base, **var}).config())
+    except Exception:  # noqa: BLE001 - a user effect's constructor: its keys are then not checked here
+        return None
+    return keys
 
 
 def effect_settings(effects: Sequence[str], t, u, y, split) -> dict:

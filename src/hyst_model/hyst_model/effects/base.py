@@ -128,7 +128,8 @@ class Effect:
         return ()
 
     def config(self) -> dict[str, float | str]:
-        """Non-fitted settings to store in a params file as ``<name>.<key>`` (none by default)."""
+        """Non-fitted settings to store in a params file as ``<name>.<key>`` (none by default); ``--config`` and the
+        identification node's ``effect_config`` accept exactly these keys (over the effect's variants)."""
         return {}
 
     def legacy_values(self) -> dict[str, float]:
