@@ -23,7 +23,7 @@ from hyst_model.io.csvio import write_csv
 from hyst_model.io.outputs import check_output
 
 from .errors import ConfigError
-from .excitation import DEFAULT_PARTS, DEFAULT_RATE, PARTS, ExcitationSpec, build_excitation
+from .excitation import DEFAULT_PARTS, DEFAULT_RATE, MAX_RATE, MIN_RATE, PARTS, ExcitationSpec, build_excitation
 
 __all__ = ["register", "run", "spec_from_args"]
 
@@ -75,8 +75,9 @@ def spec_from_args(args: argparse.Namespace) -> ExcitationSpec:
         raise ConfigError(f"--v-min/--v-max {v_min:g}..{v_max:g} V leave the {args.profile} amplifier's range "
                           f"{lim.v_min:g}..{lim.v_max:g} V")
     slew = float(min(lim.slew_max, 1e9)) if args.slew_max is None else args.slew_max
-    if not (math.isfinite(args.rate) and 0.0 < args.rate <= 100_000.0):
-        raise ConfigError(f"--rate must be in (0, 100000] Hz, got {args.rate:g}")
+    if not (math.isfinite(args.rate) and MIN_RATE <= args.rate <= MAX_RATE):  # what hyst_excite_node plays
+        raise ConfigError(f"--rate must be in [{MIN_RATE:g}, {MAX_RATE:g}] Hz (hyst_excite_node's range), "
+                          f"got {args.rate:g}")
     parts = tuple(x.strip() for x in args.parts.split(",") if x.strip())
     return ExcitationSpec(v_min=v_min, v_max=v_max, slew_max=slew, dt=1.0 / args.rate, parts=parts,
                           amplitudes=_floats(args.amplitudes, "--amplitudes"), frequency=args.frequency,

@@ -31,15 +31,16 @@ import numpy as np
 
 from .errors import ConfigError
 
-__all__ = ["PARTS", "DEFAULT_PARTS", "DEFAULT_RATE", "ExcitationSpec", "Excitation", "build_excitation",
-           "from_samples"]
+__all__ = ["PARTS", "DEFAULT_PARTS", "DEFAULT_RATE", "MIN_RATE", "MAX_RATE", "ExcitationSpec", "Excitation",
+           "build_excitation", "from_samples"]
 
 #: Every part :func:`build_excitation` can play.
 PARTS = ("steps", "sines", "triangles", "multisine", "sweep", "noise")
 #: The parts played when none are named (the excitation earlier sessions measured the lab workflow with).
 DEFAULT_PARTS = ("steps", "sines", "triangles", "multisine", "sweep")
-#: Sample rate (Hz) of ``hyst excite`` and ``hyst_excite_node`` when none is given.
+#: Sample rate (Hz) of ``hyst excite`` and ``hyst_excite_node`` when none is given, and the range both take.
 DEFAULT_RATE = 1000.0
+MIN_RATE, MAX_RATE = 1.0, 5000.0
 
 
 @dataclass(frozen=True)

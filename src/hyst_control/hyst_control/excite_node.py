@@ -25,7 +25,8 @@ from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
 
 from .errors import ControlError
-from .excitation import DEFAULT_RATE, PARTS, Excitation, ExcitationSpec, build_excitation, from_samples
+from .excitation import (DEFAULT_RATE, MAX_RATE, MIN_RATE, PARTS, Excitation, ExcitationSpec, build_excitation,
+                         from_samples)
 
 __all__ = ["ExciteNode", "main"]
 
@@ -65,7 +66,7 @@ class ExciteNode(AtomicParametersNode):
         lim = GMA_LIMITS if prof == "gma" else PEA_LIMITS
         s = ExcitationSpec()
         d("rate", DEFAULT_RATE, ParameterDescriptor(description="stage sample rate (Hz)",
-                                              floating_point_range=fp_range(1, 5000), **ro))
+                                                    floating_point_range=fp_range(MIN_RATE, MAX_RATE), **ro))
         d("v_min", lim.v_min, ParameterDescriptor(description="lowest command (V), inside the profile",
                                                   floating_point_range=fp_range(lim.v_min, lim.v_max), **ro))
         d("v_max", lim.v_max, ParameterDescriptor(description="highest command (V), inside the profile",
