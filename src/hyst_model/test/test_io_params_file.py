@@ -135,3 +135,22 @@ def test_diagnose_refuses_an_existing_out_before_any_work(tmp_path, capsys):
     assert main(["diagnose", str(tmp_path / "r.csv"), "--out", str(tmp_path / "p.yaml"), "--quiet"]) == 2
     assert "exists; use --force" in capsys.readouterr().err
     assert (tmp_path / "p.yaml").read_text() == "keep me\n"
+
+
+def test_a_key_no_effect_has_is_refused_and_every_variants_keys_are_read(tmp_path):
+    """A mistyped key in an effect's section (``drift.sid``) ran the effect with its default without a word; now
+    it is one clear error naming the effect's keys. Keys of the effect's other configurations (a node's
+    parameter dump holds the feedback structure's with a series mode) still read, and are not used."""
+    from hyst_model.effects import compose
+    m = compose(BASE_MODELS["mbw"]({"u_scale": 15.0, "y_scale": 5.42e-6, "dt": 5e-4}), ["drift", "dynamics"],
+                {"u_scale": 15.0, "y_scale": 5.42e-6, "dt": 5e-4})
+    write_params(tmp_path / "p.yaml", spec_from_model(m, m.theta0, dt=5e-4))
+    doc = yaml.safe_load((tmp_path / "p.yaml").read_text())
+    model = doc["/**"]["ros__parameters"]["model"]
+    model["dynamics"]["gain"] = 1.0  # the feedback structure's parameter beside a series mode
+    (tmp_path / "dump.yaml").write_text(yaml.safe_dump(doc))
+    assert read_params(tmp_path / "dump.yaml").model().effects[1].structure == "series"
+    model["drift"]["sid"] = "sensor"
+    (tmp_path / "typo.yaml").write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParamsError, match=r"model\.drift\.sid is none of drift's parameters or settings \(.*side"):
+        read_params(tmp_path / "typo.yaml")

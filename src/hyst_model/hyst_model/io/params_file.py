@@ -178,6 +178,29 @@ def write_params(path: str | Path, spec: ParamsSpec, *, force: bool = False, nod
     return path
 
 
+def _check_effect_keys(path: Path, effects: list, flat: Mapping) -> None:
+    """Refuse a key inside a listed effect's section that is none of its parameters or settings (over its
+    variants, so a file holding every configuration's keys — a node's parameter dump — still reads): a mistyped
+    ``drift.sid: sensor`` was read without a word and the effect ran with its default."""
+    from ..effects import EFFECTS
+    base = {"dt": 1e-3, "u_scale": 1.0, "y_scale": 1e-6}
+    for name in effects:
+        cls = EFFECTS.get(name)
+        if cls is None:
+            continue
+        known: set = set()
+        try:
+            for var in [{}] + list(cls.variants() if hasattr(cls, "variants") else []):
+                e = cls({**base, **var})
+                known |= set(e.config()) | {p.name for p in e.params()} | set(e.legacy_values())
+        except Exception:  # noqa: BLE001 - a user effect whose constructor needs more: its keys are not checked
+            continue
+        bad = sorted(k for k in flat if k.startswith(name + ".") and k[len(name) + 1:] not in known)
+        if bad:
+            raise ParamsError(f"{path}: model.{bad[0]} is none of {name}'s parameters or settings "
+                              f"({', '.join(sorted(known))})")
+
+
 def read_params(path: str | Path) -> ParamsSpec:
     """Read a params file written by :func:`write_params` (or by hand in the same layout).
 
@@ -187,7 +210,8 @@ def read_params(path: str | Path) -> ParamsSpec:
     Raises
     ------
     ParamsError
-        Missing or unreadable file, no ``model`` section, unknown base model or effect, missing parameters.
+        Missing or unreadable file, no ``model`` section, unknown base model or effect, missing parameters, a key
+        in an effect's section that is none of its parameters or settings.
     """
     path = Path(path)
     try:
@@ -232,6 +256,7 @@ def read_params(path: str | Path) -> ParamsSpec:
     except (ValueError, TypeError) as err:
         raise ParamsError(f"{path}: invalid model configuration ({err})") from err
     names = set(m.names)
+    _check_effect_keys(path, spec.effects, flat)
     spec.values = {k: float(v) for k, v in numeric.items() if k in names}
     spec.config = {k: v for k, v in flat.items() if k not in names}
     bad = [k for k, v in spec.values.items() if not np.isfinite(v)]
