@@ -72,6 +72,7 @@ def parse_effect_config(items: Sequence[str], effects: Sequence[str]) -> dict:
     DataError
         An item that is not ``EFFECT.KEY=VALUE``, names an effect not listed, or a setting the effect has not.
     """
+    from .effects.compose import effect_keys  # late: effects import the models
     out: dict = {}
     for item in items:
         key, sep, value = item.partition("=")
@@ -81,7 +82,8 @@ def parse_effect_config(items: Sequence[str], effects: Sequence[str]) -> dict:
             raise DataError(f"--config needs EFFECT.KEY=VALUE, e.g. dynamics.structure=feedback, got {item!r}")
         if name not in effects:
             raise DataError(f"--config {key}: effect {name!r} is not in --effects ({', '.join(effects) or 'none'})")
-        known = _settings(name)
+        keys = effect_keys(name)
+        known = None if keys is None else keys[0]
         if known is not None and key.split(".", 1)[1] not in known:
             raise DataError(f"--config {key}: {name} has no setting {key.split('.', 1)[1]!r}; its settings are "
                             f"{', '.join(sorted(known)) or 'none'}")
@@ -90,23 +92,6 @@ def parse_effect_config(items: Sequence[str], effects: Sequence[str]) -> dict:
         except ValueError:
             out[key] = value
     return out
-
-
-def _settings(name: str) -> set[str] | None:
-    """The configuration keys (local names) of effect ``name`` over its variants; None when they cannot be read
-    (an effect this process does not know, or whose constructor needs more than the scales)."""
-    from .effects import EFFECTS
-    cls = EFFECTS.get(name)
-    if cls is None:
-        return None
-    base = {"dt": 1e-3, "u_scale": 1.0, "y_scale": 1e-6}
-    keys: set[str] = set()
-    try:
-        for var in [{}] + list(cls.variants() if hasattr(cls, "variants") else []):
-            keys |= set(cls({**base, **var}).config())
-    except Exception:  # noqa: BLE001 - a user effect's constructor: its keys are then not checked here
-        return None
-    return keys
 
 
 def effect_settings(effects: Sequence[str], t, u, y, split) -> dict:

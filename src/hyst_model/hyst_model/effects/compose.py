@@ -16,7 +16,8 @@ from ..errors import EffectError
 from ..model import Model, Param
 from .base import ComposedModel, Effect, Inner
 
-__all__ = ["EFFECTS", "compose", "register", "effect_names", "Frozen", "effects_data_config", "around_effects"]
+__all__ = ["EFFECTS", "compose", "register", "effect_names", "Frozen", "effects_data_config", "effect_keys",
+           "around_effects"]
 
 #: name → Effect subclass. Filled by :func:`_load_builtins` at import and by :func:`register`.
 EFFECTS: dict[str, type[Effect]] = {}
@@ -150,6 +151,27 @@ def effects_data_config(names: Sequence[str], t: np.ndarray, u: np.ndarray, y: n
             raise EffectError(f"unknown effect {n!r}; choose from {', '.join(sorted(EFFECTS))}")
         out.update(EFFECTS[n].data_config(t, u, y, scored) or {})
     return out
+
+
+def effect_keys(name: str) -> tuple[frozenset[str], frozenset[str]] | None:
+    """The keys (local names) effect ``name`` reads from a params file, over all its variants: its settings
+    (:meth:`Effect.config`) and its parameters (with :meth:`Effect.legacy_values`). None for an effect this
+    process does not know, or whose constructor needs more than the scales (a user effect): its keys are then not
+    checked (``--config``, :func:`hyst_model.io.params_file.read_params`)."""
+    cls = EFFECTS.get(name)
+    if cls is None:
+        return None
+    base = {"dt": 1e-3, "u_scale": 1.0, "y_scale": 1e-6}
+    settings: set[str] = set()
+    params: set[str] = set()
+    try:
+        for var in [{}] + list(cls.variants() if hasattr(cls, "variants") else []):
+            e = cls({**base, **var})
+            settings |= set(e.config())
+            params |= {p.name for p in e.params()} | set(e.legacy_values())
+    except Exception:  # noqa: BLE001 - a user effect's constructor: its keys are then not checked
+        return None
+    return frozenset(settings), frozenset(params)
 
 
 def around_effects(m: ComposedModel, theta: np.ndarray, t, u, y) -> tuple[np.ndarray, np.ndarray]:

@@ -182,19 +182,12 @@ def _check_effect_keys(path: Path, effects: list, flat: Mapping) -> None:
     """Refuse a key inside a listed effect's section that is none of its parameters or settings (over its
     variants, so a file holding every configuration's keys — a node's parameter dump — still reads): a mistyped
     ``drift.sid: sensor`` was read without a word and the effect ran with its default."""
-    from ..effects import EFFECTS
-    base = {"dt": 1e-3, "u_scale": 1.0, "y_scale": 1e-6}
+    from ..effects.compose import effect_keys
     for name in effects:
-        cls = EFFECTS.get(name)
-        if cls is None:
+        keys = effect_keys(name)
+        if keys is None:
             continue
-        known: set = set()
-        try:
-            for var in [{}] + list(cls.variants() if hasattr(cls, "variants") else []):
-                e = cls({**base, **var})
-                known |= set(e.config()) | {p.name for p in e.params()} | set(e.legacy_values())
-        except Exception:  # noqa: BLE001 - a user effect whose constructor needs more: its keys are not checked
-            continue
+        known = keys[0] | keys[1]
         bad = sorted(k for k in flat if k.startswith(name + ".") and k[len(name) + 1:] not in known)
         if bad:
             raise ParamsError(f"{path}: model.{bad[0]} is none of {name}'s parameters or settings "
