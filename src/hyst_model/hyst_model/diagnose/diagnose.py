@@ -27,7 +27,9 @@ The engine (:func:`diagnose`)
    validation RMSE at each rung — where no refit validates better but the rung's training error exceeds its
    validation error (the blocks miss where an effect acts: the largest excursions), by the same test on the
    training part (:func:`~.blind.training_only`) —, then takes the backward step of stepwise regression
-   (:mod:`.prune`): an effect the others make unnecessary is dropped again.
+   (:mod:`.prune`): an effect the others make unnecessary is dropped again; the exchange step (:mod:`.swap`)
+   replaces an effect by a simpler one, and the configuration step (:mod:`.reconfig`) refits each effect of
+   the final model in its other configurations (taken only when significantly better).
 """
 from __future__ import annotations
 
@@ -46,6 +48,7 @@ from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scal
 from .adequacy import base_caution
 from .parallel import default_jobs
 from .prune import prune
+from .reconfig import reconfigure
 from .swap import swap
 from .ladder import climb
 from .setup import Candidate, Rung, Setup
@@ -202,6 +205,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     chosen = prune(s, ladder, models, chosen, cands)                 # 3b. and its backward step
     chosen, swapped = swap(s, ladder, models, chosen, cands, full)  # 3c. and its exchange step
     if swapped:
+        chosen = prune(s, ladder, models, chosen, cands)
+    if reconfigure(s, ladder, models, chosen, cands):                 # 3d. and each effect's configuration
         chosen = prune(s, ladder, models, chosen, cands)
     ranked, missing, unexplained, expl = verdict(s, cands, ladder, models, chosen, unexplained_factor,
                                                  _explain)           # 4. the answer in words

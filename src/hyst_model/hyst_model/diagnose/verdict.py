@@ -42,7 +42,11 @@ def verdict(s: Setup, cands: dict, ladder: list, models: dict[str, tuple[Model, 
     # Best first: the final model's effects, then the rest by validation RMSE.
     ranked = [cands[nm] for nm in final_order(chosen, cands)] + sorted(
         (c for c in cands.values() if c.effect not in chosen), key=lambda c: (not c.significant, c.rmse))
-    rung_val = {tuple(rg.effects): rg.rmse for rg in ladder}
+    # A candidate was tried on the climb's rung with its effects: the first such rung (the after-the-ladder steps
+    # append rungs with the same effects, refitted, which it was not tried on)
+    rung_val: dict[tuple, float] = {}
+    for rg in ladder:
+        rung_val.setdefault(tuple(rg.effects), rg.rmse)
     for c in ranked:
         c.evidence = explain(c, base, rung_val.get(tuple(c.on_top_of), base_val))
         if c.note:
