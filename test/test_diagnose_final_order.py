@@ -6,7 +6,7 @@ the backward step kept the delay (the training part needed it; without it the fi
 against 2.61 nm, without the mode at 4.37 nm) and the ranking put the mode before the delay by what each added.
 The configuration step (:mod:`hyst_model.diagnose.reconfig`) now refits the mode as two modes (2.26 nm, the
 2.23 nm noise floor), after which the delay adds nothing anywhere and is dropped: the answer is the true pair.
-The ranking rule itself is tested on its own below.
+The ranking rule itself is tested on its own in ``src/hyst_model/test/test_diagnose_choice.py``.
 """
 from __future__ import annotations
 
@@ -30,21 +30,3 @@ def test_two_modes_behind_creep_end_as_the_true_pair():
     delay = next(x for x in d.candidates if x.effect == "delay")
     assert not delay.significant and "dropped again" in delay.evidence, delay.evidence
 
-
-def test_the_effects_after_the_first_rank_by_what_each_adds_to_the_final_model():
-    from hyst_model.diagnose.setup import Candidate
-    from hyst_model.diagnose.verdict import final_order
-
-    def cand(nm: str, without: float | None) -> Candidate:
-        return Candidate(nm, 1e-9, 1e-9, 1.0, True, 0.0, "", rmse_without=without)
-
-    # the ladder took creep, delay, dynamics; without dynamics the final model errs more than without the delay
-    cands = {"creep": cand("creep", 17.5e-9), "delay": cand("delay", 2.62e-9), "dynamics": cand("dynamics", 4.37e-9)}
-    assert final_order(["creep", "delay", "dynamics"], cands) == ["creep", "dynamics", "delay"]
-    # the first stays first whatever it adds; where one was not measured, the ladder's order stands
-    cands["creep"].rmse_without = 1e-12
-    assert final_order(["creep", "delay", "dynamics"], cands)[0] == "creep"
-    cands["delay"].rmse_without = None
-    assert final_order(["creep", "delay", "dynamics"], cands) == ["creep", "delay", "dynamics"]
-    # with one effect after the first there is nothing to order
-    assert final_order(["creep", "delay"], cands) == ["creep", "delay"]
