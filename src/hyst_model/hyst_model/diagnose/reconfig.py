@@ -27,6 +27,7 @@ from ..effects.base import ComposedModel
 from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from ..model import Model
+from .blind import helps
 from .parallel import pmap
 from .refit import _effect_values, _simulate, paired_t, refit, rmse
 from .setup import Rung, Setup
@@ -91,8 +92,7 @@ def reconfigure(s: Setup, ladder: list, models: dict[str, tuple[Model, np.ndarra
         return r, nm, var, mm, th, e
 
     trials = [x for x in pmap(s, one, items) if x is not None and np.isfinite(x[0])]
-    better = [x for x in trials
-              if x[0] > 0 and r_full / x[0] >= s.min_factor and paired_t(e_full[val], x[5][val]) >= s.t_min]
+    better = [x for x in trials if helps(s, val, e_full, x[5])]  # the test that admits an effect
     if not better:
         return False
     r, nm, var, mm, th, e = min(better, key=lambda x: x[0])
