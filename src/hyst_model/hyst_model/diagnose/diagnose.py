@@ -50,6 +50,7 @@ from .parallel import default_jobs
 from .prune import prune
 from .reconfig import reconfigure
 from .swap import swap
+from .jointly import joint_pair
 from .ladder import climb
 from .setup import Candidate, Rung, Setup
 from .stages import refit_all, screen_all
@@ -201,7 +202,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
 
     cands, carry, full = screen_all(s)                               # 1. each effect on the base held fixed
     ranked = refit_all(s, cands, carry, full)                        # 2. each refitted jointly, tested
-    ladder, models, chosen = climb(s, ranked, cands, carry, full)    # 3. the error ladder
+    pair = joint_pair(s, cands, full, unexplained_factor)             # 2b. two only together, where none alone
+    ladder, models, chosen = climb(s, ranked, cands, carry, full, pair)  # 3. the error ladder
     chosen = prune(s, ladder, models, chosen, cands)                 # 3b. and its backward step
     chosen, swapped = swap(s, ladder, models, chosen, cands, full)  # 3c. and its exchange step
     if swapped:

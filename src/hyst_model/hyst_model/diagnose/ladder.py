@@ -78,10 +78,13 @@ def prefer_simpler(s: Setup, options: list[tuple[str, float, np.ndarray, float]]
     return pick, why
 
 
-def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
+def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict, pair: tuple | None = None
           ) -> tuple[list, dict[str, tuple[Model, np.ndarray]], list]:
     """Stage 3: the error ladder — the best significant effect, then, while the error is above the noise floor,
     the best further effect screened on top of the current rung and refitted (``full_rate_top`` of them).
+
+    ``pair``: where no single effect is significant, two that are only together (:func:`~.jointly.joint_pair`:
+    ``(validation RMSE, (first, second), model, θ, residual)``) make the first rung instead.
 
     Returns ``(ladder, models, chosen)``: the rungs, (model, θ) by model name, the effects in order.
     """
@@ -89,15 +92,22 @@ def climb(s: Setup, ranked: list, cands: dict, carry: dict, full: dict
     ladder = [Rung(s.base, [], s.base_val, rmse(s.e_base[train]))]
     models: dict[str, tuple[Model, np.ndarray]] = {s.base: (s.base_model, s.th_base)}
     chosen: list[str] = []
-    if not (ranked and ranked[0].significant):
+    if ranked and ranked[0].significant:
+        sig = [c for c in ranked if c.significant and c.effect in full]
+        pick, why = prefer_simpler(s, [(c.effect, c.rmse, full[c.effect][2], c.score) for c in sig])
+        best = sig[pick]
+        best.note = why or best.note  # a candidate taken on the training part's evidence keeps saying so
+        m, th, e = full[best.effect]
+        chosen.append(best.effect)
+        ladder.append(Rung(m.name, list(chosen), best.rmse, best.rmse_train))
+    elif pair is not None:
+        r, names, m, th, e = pair
+        for i, nm in enumerate(names):  # the second stands on the first (what the pair's rung shows)
+            _on_top(s, cands[nm], list(names[:i]), s.e_base, s.base_val, (r, nm, m, th, e), significant=True)
+        chosen.extend(names)
+        ladder.append(Rung(m.name, effect_order(m), r, rmse(e[train])))
+    else:
         return ladder, models, chosen
-    sig = [c for c in ranked if c.significant and c.effect in full]
-    pick, why = prefer_simpler(s, [(c.effect, c.rmse, full[c.effect][2], c.score) for c in sig])
-    best = sig[pick]
-    best.note = why or best.note  # a candidate taken on the training part's evidence keeps saying so
-    m, th, e = full[best.effect]
-    chosen.append(best.effect)
-    ladder.append(Rung(m.name, list(chosen), best.rmse, best.rmse_train))
     models[m.name] = (m, th)
     cur_e = e
     while len(chosen) < s.max_rungs:
