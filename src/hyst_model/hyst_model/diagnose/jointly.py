@@ -26,7 +26,7 @@ from ..effects.signals import fmt_len
 from ..errors import EffectError, FitError
 from .blind import helps
 from .parallel import pmap
-from .refit import guarded_refit, paired_t, rmse
+from .refit import _effect_values, guarded_refit, paired_t, rmse
 from .setup import Candidate, Setup
 
 __all__ = ["joint_pair"]
@@ -63,8 +63,7 @@ def joint_pair(s: Setup, cands: dict[str, Candidate], full: dict, unexplained_fa
     def one(own: Setup, pair: tuple[str, str]):
         prior: dict = {}
         for nm in pair:
-            m1, th1, _ = full[nm]
-            prior.update({k: v for k, v in m1.unpack(th1).items() if k.startswith(nm + ".")})
+            prior.update(_effect_values(full[nm][0], full[nm][1], nm))
         try:
             m, th, yh = guarded_refit(own.base_model, list(pair), own.cfg, t, u, y, val, {**start_base, **prior},
                                       theta_base=own.th_base, fitter=own.fit, prior=prior)
@@ -81,11 +80,11 @@ def joint_pair(s: Setup, cands: dict[str, Candidate], full: dict, unexplained_fa
     if not ok:
         return None
     r, pair, m, th, e = min(ok, key=lambda x: x[0])
-    first, second = sorted(pair, key=lambda nm: rmse(full[nm][2][val]))
+    alone = {nm: rmse(full[nm][2][val]) for nm in pair}
+    first, second = sorted(pair, key=alone.__getitem__)
     for nm, other in ((first, second), (second, first)):
-        alone = rmse(full[nm][2][val])
         cands[nm].note = (f"taken together with {other}: alone neither validates significantly better than the "
-                          f"base ({nm} {fmt_len(alone)}, {other} {fmt_len(rmse(full[other][2][val]))}, base "
+                          f"base ({nm} {fmt_len(alone[nm])}, {other} {fmt_len(alone[other])}, base "
                           f"{fmt_len(s.base_val)}), together {fmt_len(r)} (paired t "
                           f"{paired_t(full[nm][2][val], e[val]):.1f} against {nm} alone)")
     return r, (first, second), m, th, e
