@@ -135,7 +135,7 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
     summary = {"bag": str(path), "model": cfg.model, "effects": list(cfg.effects), "method": cfg.method,
                "rmse": res.rmse, "rmse_train": res.rmse_train, "seconds": res.seconds, "samples": len(rec),
-               "params": res.params, "dt": rec.dt, "data_notes": notes, **identified_range(rec.u),
+               "params": res.params, "dt": rec.dt, "data_notes": notes, **identified_range(rec.u, rec.y),
                "admissibility": adm.to_json(), "constrained": constrained}
     return summary, model, res, rec.dt
 

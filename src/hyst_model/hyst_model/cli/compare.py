@@ -174,12 +174,15 @@ def run(args: argparse.Namespace) -> int:
     if isinstance(dt_fit, (int, float)) and dt_fit > 0 and abs(rec.dt / dt_fit - 1.0) > 0.02:
         notes.append(f"note: the model was fitted at a {dt_fit * 1e3:.4g} ms sample period, this record has "
                      f"{rec.dt * 1e3:.4g} ms; per-sample models do not transfer across sample rates")
-    from ..identify.input_range import range_note
+    from ..identify.input_range import output_note, range_note
     far = range_note(spec.fit, rec.u)
     if far:
         notes.append(f"note: {far}")
     rec, yhat, st = compare_record(rec, model, theta, n_levels=args.levels, max_lag=args.lags, window=window,
                                    diverges_why=far)
+    off = output_note(spec.fit, yhat)
+    if off:
+        notes.append(f"note: {off}")
     report_dir = None
     if args.report:
         from ..diagnose.report import write_report

@@ -144,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
         model, theta = fm, fth
         from ..identify.input_range import identified_range
         prov = {"method": "diagnose", "rmse": rmse_v, "rmse_train": rmse_t, "data": str(args.data),
-                "controllers": adm.controllers, **identified_range(rec.u)}
+                "controllers": adm.controllers, **identified_range(rec.u, rec.y)}
         if constrained:
             from ..identify.admissible import provenance
             prov["admissible"] = provenance(constrained["free_rmse"])

@@ -185,7 +185,7 @@ def run(args) -> int:
             prov["seed"] = args.seed
         prov["controllers"] = adm.controllers
         from ..identify.input_range import identified_range
-        prov.update(identified_range(rec.u))
+        prov.update(identified_range(rec.u, rec.y))
         if constrained:
             from ..identify.admissible import provenance
             prov["admissible"] = provenance(constrained["free_rmse"])

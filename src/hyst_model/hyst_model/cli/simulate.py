@@ -59,14 +59,15 @@ def run(args) -> int:
                             f"{1 / float(dt_fit):.6g} Hz; resample the input or pass --any-rate")
     if args.steady_periods < 0 or args.steady_periods > 1000:
         raise DataError("--steady-periods must be between 0 and 1000")
-    from ..identify.input_range import range_note
+    from ..identify.input_range import output_note, range_note
     note = range_note(spec.fit, u)
     y = _run(model, theta, t, u, args.steady_periods)
     if not np.all(np.isfinite(y)):
         why = note or "input outside the range it was identified on?"
         raise FitError(f"the model diverges on {args.input} ({why})")
-    if note:
-        print(f"hyst simulate: warning: {note}", file=sys.stderr)
+    for n in (note, output_note(spec.fit, y)):
+        if n:
+            print(f"hyst simulate: warning: {n}", file=sys.stderr)
     write_csv(out, {"t": t, "u": u, "y": y}, force=args.force)
     print(f"wrote {out} ({t.size} samples, y {y.min() * 1e6:.4g} .. {y.max() * 1e6:.4g} µm)", file=sys.stderr)
     return 0
