@@ -6,7 +6,7 @@ infinity on a fresh ±3.8 V record). ``hyst fit --out`` and ``hyst diagnose --ou
 file's provenance (``fit.u_min``, ``fit.u_max``, V, and the measured output's ``fit.y_min``, ``fit.y_max``, m);
 ``hyst simulate`` and ``hyst compare`` say so when an input leaves it, and when the model's output goes far beyond
 what the record measured (:func:`output_note`): a finite prediction can still be one no stage makes (on fresh
-records of accuracy seed 50, fitted models erred by 0.9 mm to 2.5e11 m RMS on stages of a few µm, inputs 1.6×
+records of accuracy seed 50, fitted models erred by 0.9 mm to 2.5e11 m RMS on stages of a few µm; 5000138: inputs 1.6×
 the identified range).
 """
 from __future__ import annotations
