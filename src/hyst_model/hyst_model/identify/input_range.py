@@ -41,20 +41,33 @@ def identified_range(u, y=None) -> dict[str, float]:
     return out
 
 
+def _stored(fit: Mapping, key: str) -> tuple[float, float] | None:
+    """``(min, max)`` of ``key`` (``u``/``y``) in a params file's provenance, or None (an older file, a bad entry)."""
+    lo, hi = fit.get(f"{key}_min"), fit.get(f"{key}_max")
+    if not isinstance(lo, (int, float)) or not isinstance(hi, (int, float)) or not hi >= lo:
+        return None
+    return float(lo), float(hi)
+
+
+def _beyond(v, lo: float, hi: float, slack: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """The finite samples of ``v`` and the mask of those more than ``slack`` outside ``[lo, hi]``; None if none is."""
+    v = np.asarray(v, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    beyond = (v < lo - slack) | (v > hi + slack)
+    return (v, beyond) if beyond.any() else None
+
+
 def range_note(fit: Mapping, u, tolerance: float = TOLERANCE) -> str | None:
     """A sentence when ``u`` leaves the range in a params file's provenance ``fit`` by more than ``tolerance`` of
     its span, else None (also when the file does not record a range)."""
-    lo, hi = fit.get("u_min"), fit.get("u_max")
-    if not isinstance(lo, (int, float)) or not isinstance(hi, (int, float)) or not hi >= lo:
+    rng = _stored(fit, "u")
+    if rng is None:
         return None
-    u = np.asarray(u, dtype=np.float64)
-    u = u[np.isfinite(u)]
-    if not u.size:
+    lo, hi = rng
+    found = _beyond(u, lo, hi, tolerance * max(hi - lo, 1e-12))
+    if found is None:
         return None
-    slack = tolerance * max(float(hi) - float(lo), 1e-12)
-    beyond = (u < lo - slack) | (u > hi + slack)
-    if not beyond.any():
-        return None
+    u, beyond = found
     share = float(np.mean(beyond))
     return (f"the input reaches {np.min(u):.4g} .. {np.max(u):.4g} V, outside the {lo:.4g} .. {hi:.4g} V the model "
             f"was identified on ({share:.0%} of the samples): it extrapolates there and may be far off or diverge; "
@@ -64,17 +77,14 @@ def range_note(fit: Mapping, u, tolerance: float = TOLERANCE) -> str | None:
 def output_note(fit: Mapping, y, spans: float = OUTPUT_SPANS) -> str | None:
     """A sentence when the model output ``y`` (m) goes more than ``spans`` × the measured output's span beyond
     either end of the range in ``fit`` (``y_min``, ``y_max``), else None (also for a file without the range)."""
-    lo, hi = fit.get("y_min"), fit.get("y_max")
-    if not isinstance(lo, (int, float)) or not isinstance(hi, (int, float)) or not hi > lo:
+    rng = _stored(fit, "y")
+    if rng is None or not rng[1] > rng[0]:
         return None
-    y = np.asarray(y, dtype=np.float64)
-    y = y[np.isfinite(y)]
-    if not y.size:
+    lo, hi = rng
+    found = _beyond(y, lo, hi, spans * (hi - lo))
+    if found is None:
         return None
-    slack = spans * (float(hi) - float(lo))
-    beyond = (y < lo - slack) | (y > hi + slack)
-    if not beyond.any():
-        return None
+    y, beyond = found
     return (f"the model's output reaches {np.min(y) * 1e6:.4g} .. {np.max(y) * 1e6:.4g} µm, far beyond the "
             f"{lo * 1e6:.4g} .. {hi * 1e6:.4g} µm of the record it was identified on ({np.mean(beyond):.0%} of the "
             "samples more than its span outside): no stage of that record moves so far, the model extrapolates or "
