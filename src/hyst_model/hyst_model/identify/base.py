@@ -164,16 +164,27 @@ class TrainProblem:
         return r0, J
 
     def normal_equations(self, theta: np.ndarray):
-        """``(JᵀJ, Jᵀr, rᵀr)`` of the normalised residuals: fused (MBW) or from :meth:`residuals_jac`."""
+        """``(JᵀJ, Jᵀr, rᵀr)`` of the normalised residuals: fused (MBW), from one sensitivity simulation summed in
+        one compiled pass (what :meth:`residuals_jac` gives, bit for bit) or from forward differences."""
         if self.has_normal:
             model = cast(_NormalModel, self.model)  # has_normal: hasattr(model, "normal_equations")
             self.n_eval += 1
             with np.errstate(all="ignore"):
                 return model.normal_equations(np.asarray(theta, dtype=np.float64), self.t, self.u, self.a,
                                                    self.y, self.scale)
+        theta = np.asarray(theta, dtype=np.float64)
+        if self.has_jac:  # residuals_jac and normal_from_jac fused into one compiled pass (the same sums)
+            from .lm import scored_normal_equations
+            jm = cast(_JacModel, self.model)
+            self.n_eval += 1
+            with np.errstate(all="ignore"):
+                yhat, J = jm.simulate_jac(theta, self.t, self.u)
+            keep = self.keep if self.keep is not None else np.ones(self.y.size, dtype=np.bool_)
+            return scored_normal_equations(np.ascontiguousarray(yhat, dtype=np.float64),
+                                           np.ascontiguousarray(J, dtype=np.float64), self.a,
+                                           np.ascontiguousarray(self.y), self.scale, keep)
         from .lm import normal_from_jac
-        fun = self.residuals_jac if self.has_jac else self.fd_residuals_jac
-        return normal_from_jac(fun)(np.asarray(theta, dtype=np.float64))
+        return normal_from_jac(self.fd_residuals_jac)(theta)
 
     def cost(self, theta: np.ndarray) -> float:
         """Training RMSE (m), inf for a diverging parameter set."""

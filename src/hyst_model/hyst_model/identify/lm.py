@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-__all__ = ["LMResult", "bounded_lm", "normal_from_jac", "sum_squares"]
+__all__ = ["LMResult", "bounded_lm", "normal_from_jac", "scored_normal_equations", "sum_squares"]
 
 
 @dataclass
@@ -46,6 +46,47 @@ def _normal_equations(J: np.ndarray, r: np.ndarray):
             # kept element sums the same products in the same order as the triangle did (bit for bit)
             for j in range(p):
                 Hi[j] += a * Jk[j]
+    for i in range(p):
+        for j in range(i):
+            H[i, j] = H[j, i]
+    return H, g, rr
+
+
+@njit(cache=True, nogil=True)
+def scored_normal_equations(yhat: np.ndarray, J: np.ndarray, a: int, y: np.ndarray, scale: float,
+                            keep: np.ndarray):
+    """:func:`_normal_equations` of r = (yhat[a:] − y)/scale and J[a:]/scale over the rows ``keep`` marks.
+
+    What :meth:`~hyst_model.identify.base.TrainProblem.residuals_jac` and :func:`normal_from_jac` compute in
+    five array passes (row slice, the hold-out mask's copies, the division, two finiteness checks), in one: each
+    element is the same division, and the kept rows are summed in order, so the sums are the same bit for bit.
+    A non-finite residual or derivative on a kept row rejects the point (``rr`` = inf), as they do.
+    ``keep`` has ``y``'s length (all True without an interleaved hold-out).
+    """
+    n = y.size
+    p = J.shape[1]
+    H = np.zeros((p, p))
+    g = np.zeros(p)
+    Jk = np.empty(p)
+    rr = 0.0
+    for k in range(n):
+        if not keep[k]:
+            continue
+        rk = (yhat[a + k] - y[k]) / scale
+        if not np.isfinite(rk):
+            return np.zeros((p, p)), np.zeros(p), np.inf
+        for i in range(p):
+            v = J[a + k, i] / scale
+            if not np.isfinite(v):
+                return np.zeros((p, p)), np.zeros(p), np.inf
+            Jk[i] = v
+        rr += rk * rk
+        for i in range(p):
+            c = Jk[i]
+            g[i] += c * rk
+            Hi = H[i]
+            for j in range(p):  # the full row, as in _normal_equations (the same sums in the same order)
+                Hi[j] += c * Jk[j]
     for i in range(p):
         for j in range(i):
             H[i, j] = H[j, i]
