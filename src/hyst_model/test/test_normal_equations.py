@@ -91,3 +91,22 @@ def test_composed_normal_equations_are_those_of_residuals_jac_bit_for_bit():
     H, g, rr = p.normal_equations(bad)
     assert rr == np.inf and not H.any() and not g.any()
     assert normal_from_jac(p.residuals_jac)(bad)[2] == np.inf
+
+
+def test_a_trial_cost_is_the_sum_of_the_residuals_squares_bit_for_bit():
+    """The fused trial cost (the squares summed in the simulation's pass) is what summing ``residuals`` gives,
+    masked and unmasked, and a diverging point costs the penalty on every kept row, as there."""
+    from hyst_model.identify.lm import sum_squares
+
+    for mask, a in ((False, 0), (False, 300), (True, 0)):
+        m, p = _composed_problem(mask, a)
+        for th in (m.theta0 * 1.01, m.theta0 * 0.97):
+            rr = p.sum_squares(th)
+            assert rr == sum_squares(np.ascontiguousarray(p.residuals(th))) and np.isfinite(rr)
+    bad = m.theta0.copy()
+    bad[0] = np.nan
+    n_kept = int(p.keep.sum())
+    assert p.sum_squares(bad) == sum_squares(np.full(n_kept, p.PENALTY)) == sum_squares(p.residuals(bad))
+    n = p.n_eval
+    p.sum_squares(bad)  # the same point again: remembered, not simulated
+    assert p.n_eval == n

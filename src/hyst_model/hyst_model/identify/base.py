@@ -44,6 +44,9 @@ class TrainProblem:
     simulations (a diverging parameter set) give a large finite penalty so optimisers can step back.
     """
 
+    #: Every normalised residual of a diverging point (finite, so optimisers can step back from it).
+    PENALTY = 1e3
+
     def __init__(self, model: Model, t: np.ndarray, u: np.ndarray, y: np.ndarray, split: Split):
         self.t = t[:split.train_stop]
         self.u = u[:split.train_stop]
@@ -78,16 +81,30 @@ class TrainProblem:
         self.model = model
         self.n_eval = 0
         self._last_r: tuple[bytes, np.ndarray] | None = None
+        self._last_rr: tuple[bytes, float] | None = None
+        self._all: np.ndarray | None = None
         lo, hi = model.bounds
         self.lower, self.upper = lo.astype(np.float64), hi.astype(np.float64)
         self.has_jac = hasattr(model, "simulate_jac") and bool(getattr(model, "jac_available", True))
         self.has_normal = hasattr(model, "normal_equations")
         self.inactive = frozenset(getattr(model, "inactive", ()))
 
-    def simulate(self, theta: np.ndarray) -> np.ndarray:
+    def simulate_full(self, theta: np.ndarray) -> np.ndarray:
+        """The model's output from the record start to the end of training (the scored window from :attr:`a`)."""
         self.n_eval += 1
         with np.errstate(all="ignore"):
-            return np.asarray(self.model.simulate(np.asarray(theta, dtype=np.float64), self.t, self.u))[self.a:]
+            return np.asarray(self.model.simulate(np.asarray(theta, dtype=np.float64), self.t, self.u))
+
+    def simulate(self, theta: np.ndarray) -> np.ndarray:
+        return self.simulate_full(theta)[self.a:]
+
+    def _keep_all(self) -> np.ndarray:
+        """:attr:`keep`, or every scored row."""
+        if self.keep is not None:
+            return self.keep
+        if self._all is None or self._all.size != self.y.size:
+            self._all = np.ones(self.y.size, dtype=np.bool_)
+        return self._all
 
     def residuals(self, theta: np.ndarray) -> np.ndarray:
         theta = np.asarray(theta, dtype=np.float64)
@@ -97,14 +114,27 @@ class TrainProblem:
         with np.errstate(all="ignore"):  # a diverging trial point is penalised below, not warned about
             r = self._kept((self.simulate(theta) - self.y) / self.scale)
         if not np.all(np.isfinite(r)):
-            r = np.full(r.size, 1e3)
+            r = np.full(r.size, self.PENALTY)
         self._last_r = (key, r)
         return r
 
     def sum_squares(self, theta: np.ndarray) -> float:
-        """rᵀr of the normalised residuals (a trial point's cost in :func:`~hyst_model.identify.lm.bounded_lm`)."""
-        from .lm import sum_squares
-        return float(sum_squares(np.ascontiguousarray(self.residuals(theta))))
+        """rᵀr of the normalised residuals (a trial point's cost in :func:`~hyst_model.identify.lm.bounded_lm`).
+
+        Where the normal equations do not come from the residuals (sensitivities), the residuals are not kept:
+        their squares are summed in the simulation's own pass (:func:`~hyst_model.identify.lm.scored_sum_squares`,
+        bit for bit the sum of :meth:`residuals`, the last point remembered as there)."""
+        from .lm import scored_sum_squares, sum_squares
+        if not (self.has_jac or self.has_normal):  # forward differences reuse the residuals kept here
+            return float(sum_squares(np.ascontiguousarray(self.residuals(theta))))
+        theta = np.asarray(theta, dtype=np.float64)
+        key = theta.tobytes()
+        if self._last_rr is not None and self._last_rr[0] == key:
+            return self._last_rr[1]
+        rr = float(scored_sum_squares(np.ascontiguousarray(self.simulate_full(theta), dtype=np.float64), self.a,
+                                      np.ascontiguousarray(self.y), self.scale, self._keep_all(), self.PENALTY))
+        self._last_rr = (key, rr)
+        return rr
 
     def for_model(self, model: Model) -> "TrainProblem":
         """The same record and windows for another model (e.g. the base of a composed model)."""
@@ -179,10 +209,9 @@ class TrainProblem:
             self.n_eval += 1
             with np.errstate(all="ignore"):
                 yhat, J = jm.simulate_jac(theta, self.t, self.u)
-            keep = self.keep if self.keep is not None else np.ones(self.y.size, dtype=np.bool_)
             return scored_normal_equations(np.ascontiguousarray(yhat, dtype=np.float64),
                                            np.ascontiguousarray(J, dtype=np.float64), self.a,
-                                           np.ascontiguousarray(self.y), self.scale, keep)
+                                           np.ascontiguousarray(self.y), self.scale, self._keep_all())
         from .lm import normal_from_jac
         return normal_from_jac(self.fd_residuals_jac)(theta)
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-__all__ = ["LMResult", "bounded_lm", "normal_from_jac", "scored_normal_equations", "sum_squares"]
+__all__ = ["LMResult", "bounded_lm", "normal_from_jac", "scored_normal_equations", "scored_sum_squares", "sum_squares"]
 
 
 @dataclass
@@ -99,6 +99,26 @@ def sum_squares(r: np.ndarray) -> float:
     rr = 0.0
     for k in range(r.size):
         rr += r[k] * r[k]
+    return rr
+
+
+@njit(cache=True, nogil=True)
+def scored_sum_squares(yhat: np.ndarray, a: int, y: np.ndarray, scale: float, keep: np.ndarray,
+                       penalty: float) -> float:
+    """:func:`sum_squares` of r = (yhat[a:] − y)/scale over the rows ``keep`` marks, in one pass; a non-finite
+    residual makes every kept one ``penalty`` (what :meth:`~hyst_model.identify.base.TrainProblem.residuals`
+    returns for a diverging point), summed in the same order: bit for bit its cost."""
+    rr = 0.0
+    for k in range(y.size):
+        if keep[k]:
+            rk = (yhat[a + k] - y[k]) / scale
+            if not np.isfinite(rk):
+                rr = 0.0
+                for j in range(y.size):
+                    if keep[j]:
+                        rr += penalty * penalty
+                return rr
+            rr += rk * rk
     return rr
 
 
