@@ -66,8 +66,10 @@ def _lag_bank(x: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _lag_bank_cols(X: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """:func:`_lag_bank` of every column of ``X`` (n, k) in one pass (the columns vectorise)."""
+def _creep_cols(X: np.ndarray, a: np.ndarray, w: np.ndarray, g: float) -> np.ndarray:
+    """X − g (X − L) for :func:`_lag_bank` L of every column of ``X`` (n, k), in one pass (the columns vectorise;
+    the operator applied in the bank's own loop, so no n × k temporaries: the same arithmetic element by
+    element as the array expression)."""
     n, k = X.shape
     m = a.shape[0]
     c = np.empty((m, k))
@@ -84,7 +86,8 @@ def _lag_bank_cols(X: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
             for j in range(k):
                 c[i, j] = ai * c[i, j] + bi * X[r, j]
                 s[j] += wi * c[i, j]
-        out[r, :] = s
+        for j in range(k):
+            out[r, j] = X[r, j] - g * (X[r, j] - s[j])
     return out
 
 
@@ -186,7 +189,7 @@ class Creep(Effect):
         if g == 0.0:
             return J
         J = np.ascontiguousarray(J, dtype=np.float64)
-        return J - g * (J - _lag_bank_cols(J, np.exp(-sample_time(t) / taus), w))
+        return _creep_cols(J, np.exp(-sample_time(t) / taus), w, g)
 
     def online(self, theta, base=None):
         g, taus, w = self.bank(theta)
