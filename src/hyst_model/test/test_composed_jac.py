@@ -5,7 +5,9 @@ import pytest
 from hyst_model.core.params import THESIS_TABLE41
 from hyst_model.core.sensitivity import mbw_rest_state_sens, mbw_simulate_sens
 from hyst_model.effects import EFFECTS, ComposedModel, compose
+from hyst_model.effects.creep import _lag_bank
 from hyst_model.effects.compose import Frozen
+from hyst_model.effects.signals import sample_time
 from hyst_model.identify.base import TrainProblem
 from hyst_model.identify.result import Split
 from hyst_model.model import MBWModel
@@ -112,21 +114,11 @@ def test_creeps_own_push_is_its_operator_on_each_column(form, th):
     pushed = c.push(th, t, None, np.sin(t), None, J)
     each = np.column_stack([c.output(th, t, None, np.ascontiguousarray(J[:, k])) for k in range(J.shape[1])])
     np.testing.assert_allclose(pushed, each, rtol=0, atol=1e-12 * np.max(np.abs(each)))
-
-
-@pytest.mark.parametrize("form,th", [("log", [0.03, -0.2]), ("lags", [0.05, 0.04, 0.9, 0.7])])
-def test_creeps_push_is_the_operators_array_expression_bit_for_bit(form, th):
-    """The fused column kernel gives J − g (J − L) to the last bit, L each column's own lag bank."""
-    from hyst_model.effects.creep import _lag_bank
-    from hyst_model.effects.signals import sample_time
-    c = EFFECTS["creep"]({"dt": 1e-3, "creep.form": form})
-    t = np.arange(3000) * 1e-3
-    J = np.random.default_rng(4).normal(size=(t.size, 6)).cumsum(axis=0)
-    th = np.array(th)
+    # and the fused kernel is the operator's array expression J − g (J − L) to the last bit (L: each column's bank)
     g, taus, w = c.bank(th)
     a = np.exp(-sample_time(t) / taus)
     L = np.column_stack([_lag_bank(np.ascontiguousarray(J[:, k]), a, w) for k in range(J.shape[1])])
-    np.testing.assert_array_equal(c.push(th, t, None, np.sin(t), None, J), J - g * (J - L))
+    np.testing.assert_array_equal(pushed, J - g * (J - L))
 
 
 def test_a_fit_with_the_exact_jacobian_recovers_a_known_model(monkeypatch):
