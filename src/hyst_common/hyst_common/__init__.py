@@ -9,7 +9,8 @@
 * :mod:`hyst_common.runtime` — real-time scheduling and ROS-argument-aware command-line helpers (rclpy-free);
 * :mod:`hyst_common.node` — the one way to run a node (:func:`~hyst_common.node.run_node`) and all-or-nothing
   parameter sets (:class:`~hyst_common.node.AtomicParametersNode`): with the ``*_node.py`` modules, the only
-  place that imports rclpy (docs/ARCHITECTURE.md).
+  place that imports rclpy (docs/ARCHITECTURE.md);
+* :mod:`hyst_common.stopping` — the runner's stop flag and the watchdog that bounds a stop (rclpy-free).
 
 It depends on no other hyst package; every other package imports it first.
 """

@@ -7,7 +7,8 @@ with one line, SIGINT/SIGTERM turned into a flag the spin loop reads (rclpy's ow
 ``KeyboardInterrupt`` raised inside a subscription callback came back from the EventsExecutor as a bare
 ``RuntimeError`` — exit 1 with a traceback in ≈ 5 of 100 stops), a start-up error (a parameter out of its range,
 a rejected value, a missing file) as one line on stderr and exit code 2, and ``destroy_node`` plus
-``rclpy.try_shutdown`` whatever happens.
+``rclpy.try_shutdown`` whatever happens. The flag and a watchdog that bounds the way out (a hang in the spin call
+or in the ROS teardown ends the process with a reason and the stacks) are :class:`~hyst_common.stopping.StopGuard`.
 
 :class:`AtomicParametersNode` makes every parameter set all or nothing: rclpy's ``set_parameters`` (the method and
 the ``~/set_parameters`` service) validates and applies each parameter alone, so ``[v_min=100, v_max=50]`` applied
@@ -16,7 +17,6 @@ on-set callback and applied whole or not at all (one result per parameter, all e
 """
 from __future__ import annotations
 
-import signal
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -34,6 +34,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from .errors import HystError
 from .runtime import own_args
+from .stopping import StopGuard
 
 __all__ = ["run_node", "AtomicParametersNode", "fp_range", "int_range", "STARTUP_ERRORS", "KEEP_ALL_RELIABLE"]
 
@@ -142,42 +143,40 @@ def run_node(make: Callable[..., NodeT], args: Sequence[str] | None = None, *, p
         print(f"{prog}: error: unexpected argument(s) {' '.join(own)}; settings are ROS parameters "
               "(--ros-args -p name:=value); see --help", file=sys.stderr)
         return 2
-    stop = threading.Event()
-    in_main = threading.current_thread() is threading.main_thread()
-    previous = {}
-    if in_main:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, lambda *_: stop.set())
-    try:
-        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    except RuntimeError as err:  # rclpy's UnknownROSArgsError and kin: a bad --ros-args section
-        print(f"{prog}: error: ROS arguments not understood: {err}", file=sys.stderr)
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-        return 2
-    node: NodeT | None = None
+    guard = StopGuard(prog, install=threading.current_thread() is threading.main_thread())
     try:
         try:
-            node = make(*parsed)
-        except STARTUP_ERRORS + tuple(errors) as err:
-            print(f"{prog}: error: {err}", file=sys.stderr)
+            rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+        except RuntimeError as err:  # rclpy's UnknownROSArgsError and kin: a bad --ros-args section
+            print(f"{prog}: error: ROS arguments not understood: {err}", file=sys.stderr)
             return 2
-        ex = _executor(executor)
-        ex.add_node(node)
+        node: NodeT | None = None
         try:
-            while not stop.is_set() and rclpy.ok() and not (until is not None and until(node)):
-                ex.spin_once(timeout_sec=0.1)
-        except (KeyboardInterrupt, ExternalShutdownException):
-            stop.set()
-        finally:  # also when a callback raised: the driver must still ramp to its safe output
-            if on_exit is not None:
-                on_exit(node, stop.is_set())
-        ex.shutdown()
+            try:
+                node = make(*parsed)
+            except STARTUP_ERRORS + tuple(errors) as err:
+                print(f"{prog}: error: {err}", file=sys.stderr)
+                return 2
+            ex = _executor(executor)
+            ex.add_node(node)
+            guard.phase("spin")
+            try:
+                while not guard.stopped and rclpy.ok() and not (until is not None and until(node)):
+                    ex.spin_once(timeout_sec=0.1)
+            except (KeyboardInterrupt, ExternalShutdownException):
+                guard.stopped = True
+            finally:  # also when a callback raised: the driver must still ramp to its safe output
+                guard.phase("exit")
+                if on_exit is not None:
+                    on_exit(node, guard.stopped)
+                guard.phase("teardown")
+            ex.remove_node(node)
+            ex.shutdown()
+        finally:
+            guard.phase("teardown")
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-        for sig, old in previous.items():
-            signal.signal(sig, old)
+        guard.close()
     return 0
-

@@ -23,6 +23,7 @@ the recorder prints ``recording`` once its contract-topic subscriptions exist.
 from __future__ import annotations
 
 import argparse
+import os
 import queue
 import signal
 import sys
@@ -196,6 +197,9 @@ def main(args=None) -> int:
         if stopped_by_signal and rclpy.ok(context=node.context):
             _drain(node)
         _ignore_signals_while_finalising()
+        if stopped_by_signal:
+            print("hyst_bag_record: finalising the bag (further signals are ignored until it is written)",
+                  file=sys.stderr, flush=True)
         node.flush()
         node.writer.close()  # always finalise the bag, also on SIGINT/SIGTERM
 
@@ -219,16 +223,20 @@ def _drain(node: RecordNode, quiet: float = 0.3, longest: float = 3.0) -> None:
     message (or ``longest`` s — a live stream never goes quiet —, or a second signal). A lockstep run ends faster
     than a recorder on a loaded machine writes: stopping at once lost the last 3100 of 4000 samples of a demo
     bag."""
-    again = threading.Event()  # a second signal ends the drain
+    again = [False]  # a second signal ends the drain; a plain flag: a handler must take no lock (Event.set does)
+
+    def second(_s, _f) -> None:
+        again[0] = True
+
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda _s, _f: again.set())
+            signal.signal(sig, second)
     print("hyst_bag_record: stopping: taking the messages already delivered (Ctrl-C again to stop at once)",
           file=sys.stderr, flush=True)
     executor = node.executor
     end = time.monotonic() + longest
     last, quiet_since = node.received, time.monotonic()
-    while executor is not None and not again.is_set() and time.monotonic() < end and rclpy.ok(context=node.context):
+    while executor is not None and not again[0] and time.monotonic() < end and rclpy.ok(context=node.context):
         executor.spin_once(timeout_sec=0.05)
         if node.received != last:
             last, quiet_since = node.received, time.monotonic()
@@ -239,8 +247,10 @@ def _drain(node: RecordNode, quiet: float = 0.3, longest: float = 3.0) -> None:
 def _ignore_signals_while_finalising() -> None:
     """A second Ctrl-C must not interrupt writing the summary/metadata (that left an unreadable bag)."""
     def note(signum, _frame):
-        print(f"hyst_bag_record: {signal.Signals(signum).name} ignored: finalising the bag, please wait",
-              file=sys.stderr, flush=True)
+        # os.write, not print: a handler that prints while the main thread is printing raises a reentrant-call
+        # RuntimeError from the buffered stream
+        os.write(2, f"hyst_bag_record: {signal.Signals(signum).name} ignored: finalising the bag, please wait\n"
+                 .encode())
 
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
