@@ -12,6 +12,7 @@ import pytest
 GUARD = r'''
 import signal, sys, threading, time
 from hyst_common.stopping import StopGuard
+before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)  # SIG_IGN under a background job
 g = StopGuard("probe", grace=float(sys.argv[2]))
 case = sys.argv[1]
 g.phase("spin")
@@ -27,7 +28,7 @@ g.phase("teardown")
 if case == "stuck_teardown":
     threading.Event().wait()
 g.close()
-assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "handler not restored"
+assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before, "handlers not restored"
 assert signal.set_wakeup_fd(-1) == -1, "wakeup fd not restored"
 print("clean", flush=True)
 '''
