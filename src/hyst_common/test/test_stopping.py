@@ -16,6 +16,10 @@ before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)  # SI
 g = StopGuard("probe", grace=float(sys.argv[2]))
 case = sys.argv[1]
 g.phase("spin")
+if case == "other_signal":        # a signal the node handles itself is not a stop: no limit is armed by it
+    signal.signal(signal.SIGUSR2, lambda *_: None)
+    signal.raise_signal(signal.SIGUSR2)
+    time.sleep(3 * g.grace)
 print("ready", flush=True)
 if case == "stuck_spin":          # the loop never reads the flag: the main thread stays in a blocking call
     threading.Event().wait()
@@ -78,6 +82,11 @@ def test_a_normal_stop_is_untouched_and_restores_the_handlers():
 
 def test_two_signals_at_once_do_not_deadlock_the_handler():
     code, out, err = _signalled(GUARD, "normal", "1.0", ready="ready", signals=2)
+    assert code == 0 and "clean" in out and err == "", err
+
+
+def test_another_handled_signal_arms_no_limit():
+    code, out, err = _signalled(GUARD, "other_signal", "0.5", ready="ready")
     assert code == 0 and "clean" in out and err == "", err
 
 
