@@ -283,11 +283,14 @@ def test_open_loop_inverts_its_own_extended_model_exactly(case, freq, alg):
     the output on the reference at any frequency: every per-sample inverse and its timing is exact. (The effects'
     states followed the aim of the sample before: creep was 8 nm off at 10 Hz, in phase with the reference's rate.)
 
-    What is left is not the inverse: the start fades the first command's bump out (bumpless), which the model's
-    slow creep lags remember as an offset that decays over seconds — removed here with a quadratic trend. Not
-    tested, because approximate by construction: asymmetry's input term a_u (inverted with the previous command
-    standing in for the one being computed: exact only while the input is held); a fractional output delay (the
-    model interpolates between samples, which no causal inverse undoes: 4.6 nm on a 30 Hz, 6 µm sine at 2 kHz)."""
+    The open loop is exact from the start: its effect states follow the model's own prediction for the commands
+    applied (the start's faded bump included), not the aim it is handed — with the aim, the model's slow creep
+    lags kept the start's course as an offset that decayed over seconds (16.5 nm with creep and a 317 Hz mode on
+    a 1 Hz sine). DPPC reads the stage, whose creep remembers the start: its slow offset is removed with a
+    quadratic trend. Not tested, because approximate by construction: asymmetry's input term a_u (inverted with
+    the previous command standing in for the one being computed: exact only while the input is held); a
+    fractional output delay (the model interpolates between samples, which no causal inverse undoes: 4.6 nm on a
+    30 Hz, 6 µm sine at 2 kHz)."""
     import numpy as np
 
     effects = case.split("-")[0].split("+")
@@ -300,14 +303,16 @@ def test_open_loop_inverts_its_own_extended_model_exactly(case, freq, alg):
     r = run_closed_loop(c, f"sine:{freq:g}:6", 0.25, plant=plant, settle=0.5)  # 9-21 µm: never clipped
     assert r.finite and np.all((r.u > 0.0) & (r.u < 150.0))
     e = r.y - r.r
-    e = e - np.polyval(np.polyfit(r.t, e, 2), r.t)
+    if alg != "open_loop":
+        e = e - np.polyval(np.polyfit(r.t, e, 2), r.t)
     assert np.sqrt(np.mean(e[1:] ** 2)) < 1e-10, np.sqrt(np.mean(e[1:] ** 2))  # 0.1 nm; the stale aim: 8 nm
 
 
 def test_open_loop_creep_memory_follows_the_applied_start():
     """The start fades the first command's bump out; the stage's slow creep lags remember that course. Open
-    loop's effect states follow the model driven by the applied command (:attr:`OpenLoop.applied_shift`), not the
-    aim: the offset the start leaves is small (it was 11 nm when they followed the aim)."""
+    loop's effect states follow the model driven by the applied command (the compensation's prediction through
+    every effect), not the aim: the start leaves no offset (11 nm when they followed the aim, 1.8 nm when they
+    followed the aim moved by :attr:`OpenLoop.applied_shift`)."""
     import numpy as np
 
     vals = {k: v for k, (v, _) in effect_parameters(DT, 15.0, 5.42e-6).items() if k.startswith("creep.")}
@@ -317,7 +322,7 @@ def test_open_loop_creep_memory_follows_the_applied_start():
     plant = _ModelPlant(["creep"], vals, vals)
     r = run_closed_loop(c, "sine:10:6", 0.25, plant=plant, settle=0.5)
     assert r.finite
-    assert abs(float(np.mean(r.y - r.r))) < 3e-9, float(np.mean(r.y - r.r))
+    assert abs(float(np.mean(r.y - r.r))) < 1e-10, float(np.mean(r.y - r.r))
 
 
 class _Disturbed:

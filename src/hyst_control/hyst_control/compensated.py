@@ -33,6 +33,7 @@ class Compensated:
         self.name = inner.name
         # Open loop never reads the sensor: its effect states follow what it aimed at (an internal model).
         self._internal = inner.name == "open_loop"
+        comp.internal = self._internal  # its effect states then follow the model's prediction where they can
         self._r_prev = math.nan
         self._r_aim = math.nan
         self._y_prev = math.nan
@@ -84,7 +85,8 @@ class Compensated:
         aim = self._passed[-1]
         if math.isfinite(y_k):
             # open loop: the aim, moved by what the model says the applied command did beyond it (the start's
-            # faded bump, a limited command), so slow effect memory (creep lags) follows the stage's course
+            # faded bump, a limited command), so slow effect memory (creep lags) follows the stage's course;
+            # where every effect predicts, the compensation takes the model's prediction instead (exact)
             seen = aim + getattr(inner, "applied_shift", 0.0) if self._internal and math.isfinite(aim) else y_k
             x = self.comp.measure(seen, u_prev, sensor=not self._internal)
         else:
