@@ -176,8 +176,12 @@ class Compensation:
         if m and self.base is not None:
             x_hat = self.base.step(u)
             pred = self._forward(m, x_hat, u, False)
-            if m == len(self.used) and not sensor and self.internal:
-                y = pred[-1]  # the law's own model: the measurement it predicts for the commands applied
+            if m > n or (m == len(self.used) and self.internal and not sensor):
+                # the law's own model: the measurement it predicts for the commands applied, taken through
+                # every effect as one chain (an effect forwarded must not also measure: its state would advance
+                # twice — a mode beside an inner drift, 228 nm off on a 30 Hz sine)
+                y = pred[-1]
+                n = m
         for e in reversed(self.used[n:]):
             y = e.measure(y, u)
         for i in range(n - 1, -1, -1):
