@@ -90,7 +90,7 @@ class Compensated:
             seen = aim + getattr(inner, "applied_shift", 0.0) if self._internal and math.isfinite(aim) else y_k
             x = self.comp.measure(seen, u_prev, sensor=not self._internal)
         else:
-            x = y_k  # the law counts and holds on a bad sample
+            x = y_k  # the law counts and holds on a bad sample (its own model skips it as well)
         u = inner.step(self.comp.target(r_k, u_prev), x)
         self._r_aim = aim
         self._passed.appendleft(r_k)

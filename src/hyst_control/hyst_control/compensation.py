@@ -16,6 +16,9 @@ the effects enter around them (:mod:`hyst_model.effects.online`):
   predicted as one chain from the compensation's own base model (:attr:`Compensation.chain`): the measurement
   minus the whole model's prediction plus the base's, each resonance inverse driven by the prediction of what lies
   inside it, and creep outside a delay inverted with its lags at the previewed sample;
+* the open-loop inverse reads no sensor: where every effect predicts, its effect states follow the model's own
+  prediction for the commands it applied, through all of them as one chain (:attr:`Compensation.internal`), so
+  it inverts its model exactly from the start;
 * a drifting offset (input-independent, so nothing to invert) is estimated from the sensor by a disturbance
   observer and removed from measurement and reference, so the reading follows the reference (``drift.side:
   stage``, the default: the stage moves; the open-loop inverse reads no sensor and cannot follow it) — or from the
@@ -176,7 +179,7 @@ class Compensation:
         if m and self.base is not None:
             x_hat = self.base.step(u)
             pred = self._forward(m, x_hat, u, False)
-            if m > n or (m == len(self.used) and self.internal and not sensor):
+            if m == len(self.used) and self.internal and not sensor:
                 # the law's own model: the measurement it predicts for the commands applied, taken through
                 # every effect as one chain (an effect forwarded must not also measure: its state would advance
                 # twice — a mode beside an inner drift, 228 nm off on a 30 Hz sine)
