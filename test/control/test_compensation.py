@@ -273,6 +273,11 @@ _EXACT_CASES = {
     # an inner drift (here at its zero offset) ends the feedback laws' chain before the mode: the open loop still
     # predicts through every effect (forwarding the mode and also measuring it was 228 nm off at 30 Hz)
     "drift+dynamics+creep": {"dynamics.fn": 350.0, "dynamics.zeta": 0.05, "creep.gain": 0.03, "creep.tilt": 0.1},
+    # ... and the feedback laws' chain too: the predictors move inward past the drift, which predicts with its
+    # offset estimate (an inner drift broke their chain: DPPC unstable on its own model, DMRAC 246 nm off)
+    "drift+delay+dynamics": {"delay.tau": 0.001, "delay.side": "input", "dynamics.fn": 350.0,
+                             "dynamics.zeta": 0.05},
+    "drift+creep+delay": {"delay.tau": 0.0015, "delay.side": "input", "creep.gain": 0.03, "creep.tilt": 0.1},
     "creep+asymmetry": {"creep.gain": 0.03, "creep.tilt": 0.1,
                         "asymmetry.a_y": -0.003, "asymmetry.u_c": 75.0, "asymmetry.y_c": 15e-6},
 }
