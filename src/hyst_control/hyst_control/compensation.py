@@ -73,6 +73,13 @@ class Compensation:
     #: The compensation's own per-sample base model (:class:`~hyst_model.effects.online.Stepper`): with it the
     #: Smith predictors and the effects inside them are predicted as one chain (:attr:`chain`).
     base: Stepper | None = None
+    #: True for a law that reads no sensor (the open-loop inverse): its effect states follow the model's own
+    #: prediction for the commands applied, where every effect predicts (:attr:`predicts_all`), instead of the
+    #: aim it is handed. The aim is the model's output only where every command reached the stage as the law
+    #: computed it: at a start from rest or a limited command, the inverse's creep lags took the aim's course for
+    #: the stage's and stayed off it for seconds (a creep with a 317 Hz mode: 16.5 nm off its own model on a
+    #: 1 Hz sine, 0.0 nm on the prediction).
+    internal: bool = False
 
     @property
     def names(self) -> list[str]:
@@ -129,10 +136,10 @@ class Compensation:
         estimate, which stays at zero where the law reads no sensor)."""
         return self.base is not None and all(getattr(e, "predictive", False) for e in self.used)
 
-    def _forwarded(self, internal: bool) -> int:
-        """How many innermost effects :meth:`reset` and :meth:`measure` drive with the model's prediction: all
-        of them for a law on its own model (:attr:`internal` and :attr:`predicts_all`), else :attr:`chain`."""
-        return len(self.used) if internal and self.predicts_all else self.chain
+    def _own_model(self, sensor: bool = False) -> bool:
+        """True when the effect states follow the model's own prediction through every effect (:attr:`internal`,
+        no sensor reading, :attr:`predicts_all`); else only the innermost :attr:`chain` is predicted."""
+        return self.internal and not sensor and self.predicts_all
 
     def _forward(self, m: int, z: float, u: float, start: bool) -> list[float]:
         """The model's predicted measurement at each of the ``m`` innermost effects' outputs, from the base
@@ -146,21 +153,13 @@ class Compensation:
             pred.append(z)
         return pred
 
-    #: True for a law that reads no sensor (the open-loop inverse): its effect states follow the model's own
-    #: prediction for the commands applied, where every effect predicts (:attr:`predicts_all`), instead of the
-    #: aim it is handed. The aim is the model's output only where every command reached the stage as the law
-    #: computed it: at a start from rest or a limited command, the inverse's creep lags took the aim's course for
-    #: the stage's and stayed off it for seconds (a creep with a 317 Hz mode: 16.5 nm off its own model on a
-    #: 1 Hz sine, 0.0 nm on the prediction).
-    internal: bool = False
-
     def reset(self, y: float, u: float) -> float:
         """Start at rest at measured ``y`` under ``u``; returns the base model's output there."""
         x = y
         for e in reversed(self.used):
             e.reset(x, u)
             x = e.target(x, u)
-        m = self._forwarded(self.internal)
+        m = len(self.used) if self._own_model() else self.chain
         if m and self.base is not None:
             self._forward(m, self.base.reset(u), u, True)  # at rest: the stage's rest value through the effects
         return x
@@ -170,17 +169,15 @@ class Compensation:
 
         ``sensor`` False: ``y`` is the law's own aim, not a reading (open loop); observers (drift) are not fed.
         """
-        n = self.chain
-        m = self._forwarded(self.internal and not sensor)
-        if m and self.base is not None:
+        own = self._own_model(sensor)
+        # the law's own model: every effect predicted as one chain (an effect forwarded must not also measure:
+        # its state would advance twice — a mode beside an inner drift, 228 nm off on a 30 Hz sine)
+        n = len(self.used) if own else self.chain
+        if n and self.base is not None:
             x_hat = self.base.step(u)
-            pred = self._forward(m, x_hat, u, False)
-            if m == len(self.used) and self.internal and not sensor:
-                # the law's own model: the measurement it predicts for the commands applied, taken through
-                # every effect as one chain (an effect forwarded must not also measure: its state would advance
-                # twice — a mode beside an inner drift, 228 nm off on a 30 Hz sine)
-                y = pred[-1]
-                n = m
+            pred = self._forward(n, x_hat, u, False)
+            if own:
+                y = pred[-1]  # the measurement the model predicts for the commands applied
         for e in reversed(self.used[n:]):
             y = e.measure(y, u)
         for i in range(n - 1, -1, -1):
