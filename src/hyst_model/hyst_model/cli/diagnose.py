@@ -7,7 +7,8 @@ one JSON object; ``--report DIR`` writes the HTML report of :mod:`hyst_model.dia
 
 Exit status: 0 when an effect is named or nothing is missing (``none``), 3 when the error is ``unexplained``
 (at least 2× the noise floor and no library effect explains it; the JSON's ``unexplained`` says whether it is
-the loop shape or something outside the library), 2 for bad input.
+the loop shape or something outside the library; below 5× with the training samples at the floor it is ``none``
+with a ``caution``: the error lies only where the hold-out goes beyond training), 2 for bad input.
 """
 from __future__ import annotations
 

@@ -22,7 +22,10 @@ The engine (:func:`diagnose`)
    validation chunks), and reports ``"none"`` when the baseline is already at the noise floor or nothing is
    significant — no false alarms. A base error at least :data:`UNEXPLAINED_FACTOR` × the noise floor that no
    effect explains is ``"unexplained"``, never ``"none"``, with the evidence whether it is the loop shape or
-   something outside the library (:mod:`.unexplained`);
+   something outside the library (:mod:`.unexplained`) — except below 5× the floor where the base fits its
+   training samples at the floor: then the error lies only where the held-out blocks go beyond what training
+   shows, the record does not determine the base there, and the answer is ``"none"`` with that caution and where
+   the error lies (:func:`~.adequacy.held_out_only`);
 6. builds the error ladder greedily: base → + best effect → + the next effect that still helps … with the
    validation RMSE at each rung — where no refit validates better but the rung's training error exceeds its
    validation error (the blocks miss where an effect acts: the largest excursions), by the same test on the
@@ -45,7 +48,7 @@ from ..effects.signals import noise_floor, sample_time, fmt_len
 from ..errors import DataError, FitError
 from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scales, _simulate, candidate_names,
                     default_fitter, guarded_refit, refit, rmse, validation_mask)
-from .adequacy import base_caution
+from .adequacy import base_caution, held_out_only
 from .parallel import default_jobs
 from .prune import prune
 from .reconfig import reconfigure
@@ -214,7 +217,14 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
                                                  _explain)           # 4. the answer in words
     base_train = rmse(s.e_base[train])
     caution = base_caution(base, s.base_val, base_train, noise, u, unexplained_factor)
-    if caution:
+    said = False  # the caution is already in the explanation
+    if missing == "unexplained":   # nothing named: is the held-out error evidence of anything missing at all?
+        only = held_out_only(base, t, s.e_base, val, noise, noise_margin, unexplained_factor)
+        if only is not None:
+            missing, unexplained, expl = "none", None, only
+            said = caution is None
+            caution = caution or f"caution: {only}"
+    if caution and not said:
         expl = f"{expl}; {caution}"
     und = undetermined(s, full, cands, list(chosen))                 # 5. what the record cannot tell apart
     if und:
