@@ -100,7 +100,7 @@ def test_a_gap_is_faded_in_not_jumped(ctx):
 
 
 @pytest.mark.parametrize("bad", ["parts:=steps,chirp", "v_max:=200.0", "f_hi:=900.0", "profile:=xyz",
-                                 "amplitudes:=[1.5]"])
+                                 "amplitudes:=[1.5]", "profile:=custom"])
 def test_bad_start_parameter_is_one_line_and_exit_2(bad):
     exe = str(Path(sys.executable).parent / "hyst_excite_node")
     p = subprocess.run([exe, "--ros-args", "-p", bad], capture_output=True, text=True, timeout=120,
@@ -132,6 +132,26 @@ def test_plays_a_file_written_by_hyst_excite_sample_for_sample(ctx, tmp_path):
         assert sent[-1].effort[0] == exc.spec.rest
     finally:
         exc.destroy_node()
+
+
+def test_a_custom_range_file_plays_when_the_node_is_given_that_range(ctx, tmp_path):
+    """A ±10 V stage's excitation (``hyst excite --profile custom``) plays with the range it printed."""
+    from hyst_model.cli.main import main as hyst
+    f = tmp_path / "u.csv"
+    assert hyst(["excite", "--out", str(f), "--rate", "1000", "--profile", "custom", "--v-min", "-10",
+                 "--v-max", "10", "--parts", "steps", "--n-steps", "3", "--hold", "0.05"]) == 0
+    u_file = np.loadtxt(f, delimiter=",", skiprows=1, unpack=True)[1]
+    assert u_file.min() < -5.0 or u_file.max() > 5.0          # beyond the GMA's ±5 V
+    over = [Parameter("rate", value=1000.0), Parameter("file", value=str(f))]
+    exc = ExciteNode(context=ctx, parameter_overrides=over + [
+        Parameter("profile", value="custom"), Parameter("v_min", value=-10.0), Parameter("v_max", value=10.0)])
+    try:
+        np.testing.assert_array_equal(exc.excitation.u, u_file)
+        assert exc.spec.rest == 0.0
+    finally:
+        exc.destroy_node()
+    with pytest.raises(Exception, match="outside -5..5 V"):   # the GMA profile refuses the same file
+        ExciteNode(context=ctx, parameter_overrides=over + [Parameter("profile", value="gma")])
 
 
 def _file(tmp_path, rows):

@@ -9,6 +9,15 @@ Example::
 ``--params`` runs the controller with the model of a params file — its base MBW and, unless ``--no-effects``, its
 effects as compensation (:mod:`hyst_control.compensation`); ``--scenario`` makes the simulated stage a hidden-effect
 scenario (a file, or the name of one shipped with hyst_sim, e.g. ``hidden_creep``).
+
+``--stage`` says which stage is simulated: ``embedded`` (the PEA stage, 0–150 V), or ``params`` — the params
+file's own stage: its base MBW, scales and ``dt`` as the truth, driven over the input range it was identified on
+(``fit.u_min``..``fit.u_max``, or ``--v-min``/``--v-max``), slew limit a full swing in 1 ms. The default ``auto`` is
+``params`` when the file's identified range is not inside 0–150 V (a GMA's ±5 V, a ±10 V stage: the PEA stage
+would be driven where that model knows nothing), else ``embedded``. On the params stage the commands are limited to
+its range, the divergence check uses it, and the reference is placed on its stroke
+(:func:`hyst_control.reference.parse_reference` ``stroke``). Whatever the stage, commands beyond the range the
+controller's model was identified on are reported (:func:`hyst_model.identify.input_range.range_note`).
 """
 from __future__ import annotations
 
@@ -23,12 +32,16 @@ from pathlib import Path
 from hyst_control.compensation import Compensation, from_params
 from hyst_control.controller_settings import model_divergence
 from hyst_control.controllers import ALGORITHMS, CONTROLLERS, make_controller, make_supervised, mismatched
-from hyst_common.profiles import PEA_LIMITS
+from hyst_common.errors import ConfigError as CommonConfigError
+from hyst_common.limits import CommandLimits
+from hyst_common.profiles import PEA_LIMITS, custom_limits
 from hyst_control.errors import ConfigError
+from hyst_control.pid import gains_for
 from hyst_control.reference import parse_reference
 from hyst_control.stability import Resonance, guard, identified_resonance
 from hyst_model.core import pea_default
 from hyst_model.errors import HystError
+from hyst_model.identify.input_range import range_note, stored_range
 from hyst_model.io.params_file import read_params
 from hyst_sim.errors import SimError
 from hyst_sim.plant import Plant, PlantConfig
@@ -77,6 +90,14 @@ def register(subparsers) -> None:
     p.add_argument("--scenario", default=None, metavar="S.yaml",
                    help="simulated stage: a hidden-effect scenario file or a shipped name (hidden_creep, ...); "
                         "default: the embedded stage")
+    p.add_argument("--stage", choices=("auto", "embedded", "params"), default="auto",
+                   help="simulated stage: embedded (the PEA, 0-150 V), params (the --params file's own model, over "
+                        "its identified input range) or auto (default): params when that range is not inside "
+                        "0-150 V, else embedded")
+    p.add_argument("--v-min", type=float, default=None,
+                   help="--stage params: lowest command (V), default the file's identified fit.u_min")
+    p.add_argument("--v-max", type=float, default=None,
+                   help="--stage params: highest command (V), default the file's identified fit.u_max")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -121,8 +142,50 @@ def _params_model(spec, path: str, rate: float):
     return model, comp if comp.used or comp.unused else Compensation()
 
 
-def _plant(scenario: str, rate: float, seed: int):
-    """The embedded stage with a hidden-effect scenario (a file, or a name shipped with hyst_sim)."""
+def _which_stage(args: argparse.Namespace, spec) -> str:
+    """``embedded`` or ``params``: ``--stage``, with ``auto`` resolved from the params file's identified range."""
+    if args.stage == "embedded" or (args.stage == "auto" and spec is None):
+        if args.v_min is not None or args.v_max is not None:
+            raise ConfigError("--v-min/--v-max set the range of --stage params; the embedded stage is 0-150 V")
+        return "embedded"
+    if spec is None:
+        raise ConfigError("--stage params needs --params (the stage's model)")
+    if args.stage == "params":
+        return "params"
+    rng = stored_range(spec.fit, "u")
+    inside = rng is not None and PEA_LIMITS.v_min <= rng[0] and rng[1] <= PEA_LIMITS.v_max
+    if args.v_min is not None or args.v_max is not None:
+        return "params"
+    return "embedded" if inside or rng is None else "params"
+
+
+def _stage_limits(args: argparse.Namespace, spec, path: str) -> CommandLimits:
+    """The params stage's command limits: ``--v-min``/``--v-max``, else the range the file was identified on."""
+    rng = stored_range(spec.fit, "u")
+    lo = args.v_min if args.v_min is not None else (rng[0] if rng else None)
+    hi = args.v_max if args.v_max is not None else (rng[1] if rng else None)
+    if lo is None or hi is None:
+        raise ConfigError(f"{path} records no identified input range (fit.u_min, fit.u_max): give the stage's "
+                          "--v-min and --v-max (V)")
+    try:
+        return custom_limits(lo, hi)
+    except CommonConfigError as err:
+        raise ConfigError(f"--stage params range: {err}") from err
+
+
+def _params_stage(path: str, rate: float, seed: int, lim: CommandLimits) -> PlantConfig:
+    """The params file's own stage (its base MBW as the truth, the sensor of the rig's stages) over ``lim``."""
+    try:
+        base = PlantConfig.from_params_file(path, "gma" if lim.v_min < 0.0 < lim.v_max else "pea", rate,
+                                            seed=seed, v_min=lim.v_min, v_max=lim.v_max, slew_max=lim.slew_max,
+                                            v_init=lim.v_safe)
+    except (SimError, ValueError) as err:
+        raise ConfigError(f"--stage params: {err}") from err
+    return base
+
+
+def _plant(scenario: str, rate: float, seed: int, base: PlantConfig | None = None):
+    """A stage (default the embedded one) with a hidden-effect scenario (a file, or a name shipped with hyst_sim)."""
     path = Path(scenario)
     if not path.exists():
         named = scenario_dir() / (scenario if scenario.endswith(".yaml") else scenario + ".yaml")
@@ -131,7 +194,7 @@ def _plant(scenario: str, rate: float, seed: int):
             raise ConfigError(f"--scenario {scenario}: no such file, nor a shipped scenario ({shipped})")
         path = named
     try:
-        cfg = PlantConfig.from_scenario(path, base=PlantConfig.for_profile("pea", rate=rate, seed=seed))
+        cfg = PlantConfig.from_scenario(path, base=base or PlantConfig.for_profile("pea", rate=rate, seed=seed))
     except (SimError, ValueError) as err:
         raise ConfigError(f"--scenario {scenario}: {err}") from err
     return SimPlant(Plant(cfg))
@@ -148,9 +211,10 @@ def _resonance(text: str) -> tuple[float, float]:
     return fn_v, zeta_v
 
 
-def _resonant(rate: float, seed: int, fn: float, zeta: float):
-    """The default simulated stage with a ZOH-exact resonance after the hysteresis (hyst_sim's dynamics effect)."""
-    cfg = PlantConfig.for_profile("pea", rate, seed=seed)
+def _resonant(rate: float, seed: int, fn: float, zeta: float, base: PlantConfig | None = None):
+    """A simulated stage (default the embedded one) with a ZOH-exact resonance after the hysteresis (hyst_sim's
+    dynamics effect)."""
+    cfg = base or PlantConfig.for_profile("pea", rate, seed=seed)
     return SimPlant(Plant(cfg.replace(effects=cfg.effects.with_effects(dynamics=Dynamics(strength=fn,
                                                                                           damping=zeta)))))
 
@@ -166,7 +230,9 @@ def run(args: argparse.Namespace) -> int:
         args.rate = 1.0 / float(mdt) if mdt else 2000.0
     if not (math.isfinite(args.rate) and 10 <= args.rate <= 20000):
         raise ConfigError("--rate must be in [10, 20000] Hz")
-    ref = parse_reference(args.reference)
+    stage = _which_stage(args, spec)
+    limits = _stage_limits(args, spec, args.params) if stage == "params" else PEA_LIMITS
+    base_cfg = _params_stage(args.params, args.rate, args.seed, limits) if stage == "params" else None
     comp = None
     if spec is not None:
         model, comp = _params_model(spec, args.params, args.rate)
@@ -174,30 +240,41 @@ def run(args: argparse.Namespace) -> int:
         model = pea_default()
     model = mismatched(model, args.mismatch) if args.mismatch else model
     gains = _gains(args, {name: law.gains for name, law in CONTROLLERS.items() if law.gains is not None})
-    plant = _plant(args.scenario, args.rate, args.seed) if args.scenario else default_plant(args.rate, args.seed)
+    if args.scenario:
+        plant = _plant(args.scenario, args.rate, args.seed, base_cfg)
+    else:
+        plant = SimPlant(Plant(base_cfg)) if base_cfg is not None else default_plant(args.rate, args.seed)
+    # the documented references sit on the PEA's stroke; another stage gets them on its own
+    ref = parse_reference(args.reference, stroke=plant.plant.stroke_range if stage == "params" else None)
+    if stage == "params" and args.algorithm == "pid" and gains is None:  # the default SI gains are the PEA's:
+        gains = gains_for(model, limits.v_min, limits.v_max)               # keep the loop gain they were tuned for
     stab = None
     resonance = None
     if args.resonance:
         fn, zeta = _resonance(args.resonance)
-        plant = _resonant(args.rate, args.seed, fn, zeta)
+        plant = _resonant(args.rate, args.seed, fn, zeta, plant.plant.config)
         resonance = Resonance(fn, zeta)
     elif spec is not None:  # an identified resonance: the gains are checked against it, as the node does
         resonance = identified_resonance(spec.effects, spec.values, comp, spec.config)
     if resonance is not None:
         stab = guard(args.algorithm, gains if gains is not None or args.algorithm == "open_loop" else
                      make_controller(args.algorithm, model, 1.0 / args.rate).gains, model, 1.0 / args.rate,
-                     resonance, args.stability, notch=args.notch)
+                     resonance, args.stability, v_range=(limits.v_min, limits.v_max), notch=args.notch)
         gains = stab.gains
         if stab.warn:
             print(f"hyst track: warning: {stab.message}", file=sys.stderr)
     # a model that runs away within the stage's limits: refused where it runs open loop, said where it does not
-    diverging = model_divergence(args.algorithm, model, comp, PEA_LIMITS, 1.0 / args.rate)
+    diverging = model_divergence(args.algorithm, model, comp, limits, 1.0 / args.rate)
     if diverging:
         print(f"hyst track: warning: {diverging}", file=sys.stderr)
-    ctrl = make_supervised(args.algorithm, model, 1.0 / args.rate, gains=gains, initial=args.initial,
+    ctrl = make_supervised(args.algorithm, model, 1.0 / args.rate, limits, gains=gains, initial=args.initial,
                            compensation=comp, act=args.stability != "warn")
     res = run_closed_loop(ctrl, ref, args.seconds, plant=plant)
     out = res.summary()
+    beyond = range_note(spec.fit, res.u) if spec is not None else None  # the model extrapolates there
+    if beyond:
+        out.update(range_warning=beyond)
+        print(f"hyst track: warning: the commands leave the controller model's range: {beyond}", file=sys.stderr)
     if ctrl.events:  # the oscillation watch derated the law (a mode the model does not know)
         out.update(oscillation=list(ctrl.events))
         if not args.json:
@@ -206,7 +283,9 @@ def run(args: argparse.Namespace) -> int:
     if stab is not None and stab.running is not None:
         out.update(stability=stab.message, spectral_radius=stab.running.spectral_radius,
                    derated={n: b for n, _, b in stab.derated})
-    out.update(reference=args.reference, mismatch=args.mismatch, units="m, V", params=args.params,
+    out.update(stage=stage, v_min=limits.v_min, v_max=limits.v_max, reference=args.reference,
+               reference_offset=ref.offset, reference_amplitude=ref.amplitude, mismatch=args.mismatch,
+               units="m, V", params=args.params,
                scenario=args.scenario, compensated=comp.compensated(args.algorithm) if comp else [],
                not_compensated=comp.not_compensated(args.algorithm) if comp else {})
     if comp is not None and comp.not_compensated(args.algorithm) and not args.json:

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 from .errors import ConfigError
 from .limits import CommandLimits
 
-__all__ = ["Profile", "PEA", "GMA", "PROFILES", "get_profile", "V_SPAN", "PEA_LIMITS", "GMA_LIMITS"]
+__all__ = ["Profile", "PEA", "GMA", "PROFILES", "get_profile", "V_SPAN", "PEA_LIMITS", "GMA_LIMITS",
+           "CUSTOM_V_MAX", "CUSTOM_SWING_TIME", "custom_limits"]
 
 
 @dataclass(frozen=True)
@@ -107,3 +108,30 @@ def get_profile(name: str) -> Profile:
 PEA_LIMITS = PEA.limits()
 #: Command limits of the GMA driver input ±5 V (thesis Table 5.1), slew 1e4 V/s.
 GMA_LIMITS = GMA.limits()
+
+
+#: Largest |voltage| (V) a user may give another stage's amplifier (``profile custom``): high-voltage piezo
+#: amplifiers reach about 1 kV.
+CUSTOM_V_MAX = 1000.0
+#: Default slew limit of another stage's amplifier: a full swing in this many seconds (the PEA's 1e5 V/s swings its
+#: 150 V in 1.5 ms, the GMA's 1e4 V/s its 10 V in 1 ms) — protective, not a hardware fact; give it where known.
+CUSTOM_SWING_TIME = 1e-3
+
+
+def custom_limits(v_min: float, v_max: float, slew_max: float | None = None) -> CommandLimits:
+    """Command limits of a stage outside the two profiles, from its amplifier range (V) as the user gives it.
+
+    The safe voltage is 0 V where the range holds it (zero field), else the end nearer 0 V; the slew limit
+    defaults to a full swing in :data:`CUSTOM_SWING_TIME`.
+
+    Raises
+    ------
+    ConfigError
+        A bound that is not finite, beyond ±:data:`CUSTOM_V_MAX`, or an empty range.
+    """
+    lo, hi = float(v_min), float(v_max)
+    if not (math.isfinite(lo) and math.isfinite(hi) and -CUSTOM_V_MAX <= lo < hi <= CUSTOM_V_MAX):
+        raise ConfigError(f"a custom amplifier range needs finite v_min < v_max within ±{CUSTOM_V_MAX:g} V, "
+                          f"got {lo:g}..{hi:g} V")
+    slew = (hi - lo) / CUSTOM_SWING_TIME if slew_max is None else float(slew_max)
+    return CommandLimits(v_min=lo, v_max=hi, slew_max=slew, v_safe=min(max(0.0, lo), hi))

@@ -5,6 +5,7 @@ holds, sines and triangles at several amplitudes (minor loops), a multisine, a s
 band-limited noise — inside the profile's range and slew limit, starting and ending at rest. What to do with it:
 
     hyst excite --profile pea --rate 2000 --parts steps,noise,sweep --out u.csv
+    hyst excite --profile custom --v-min -10 --v-max 10 --out u.csv          # a stage outside the two profiles
     hyst simulate --params stage.yaml --input u.csv --out y.csv               # what the model expects
     hyst_excite_node --ros-args -p rate:=2000.0 -p file:=u.csv                # play it on the stage
 
@@ -18,7 +19,8 @@ import json
 import math
 import sys
 
-from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
+from hyst_common.errors import ConfigError as CommonConfigError
+from hyst_common.profiles import CUSTOM_SWING_TIME, CUSTOM_V_MAX, GMA_LIMITS, PEA_LIMITS, custom_limits
 from hyst_model.io.csvio import write_csv
 from hyst_model.io.outputs import check_output
 
@@ -42,8 +44,10 @@ def register(subparsers) -> None:
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, help="CSV to write with t,u (s, V)")
     p.add_argument("--force", action="store_true", help="overwrite --out")
-    p.add_argument("--profile", choices=("pea", "gma"), default="pea",
-                   help="limit defaults: pea (0-150 V, default) or gma (+-5 V)")
+    p.add_argument("--profile", choices=("pea", "gma", "custom"), default="pea",
+                   help="limit defaults: pea (0-150 V, default), gma (+-5 V), or custom: another stage, whose "
+                        f"range --v-min/--v-max must give (within +-{CUSTOM_V_MAX:g} V; slew default a full swing "
+                        f"in {CUSTOM_SWING_TIME * 1e3:g} ms)")
     p.add_argument("--rate", type=float, default=DEFAULT_RATE, help=f"sample rate (Hz), default {DEFAULT_RATE:g}: "
                    "the stage's, since the MBW is identified per sample")
     p.add_argument("--v-min", type=float, default=None, help="lowest command (V), default the profile's")
@@ -68,7 +72,15 @@ def register(subparsers) -> None:
 
 def spec_from_args(args: argparse.Namespace) -> ExcitationSpec:
     """The excitation the arguments describe, inside the profile (a limit beyond it is refused, not clipped)."""
-    lim = GMA_LIMITS if args.profile == "gma" else PEA_LIMITS
+    if args.profile == "custom":
+        if args.v_min is None or args.v_max is None:
+            raise ConfigError("--profile custom needs --v-min and --v-max: the stage amplifier's range (V)")
+        try:
+            lim = custom_limits(args.v_min, args.v_max, args.slew_max)
+        except CommonConfigError as err:
+            raise ConfigError(f"--v-min/--v-max: {err}") from err
+    else:
+        lim = GMA_LIMITS if args.profile == "gma" else PEA_LIMITS
     v_min = lim.v_min if args.v_min is None else args.v_min
     v_max = lim.v_max if args.v_max is None else args.v_max
     if not (lim.v_min <= v_min and v_max <= lim.v_max):
@@ -96,7 +108,10 @@ def run(args: argparse.Namespace) -> int:
                             for name, a, b in ex.segments]}
     if args.json:
         print(json.dumps(summary))
+    # the node checks the file against its own limits: name the same ones where they are not its defaults
+    lims = "" if args.profile == "pea" and args.v_min is None and args.v_max is None else (
+        f" -p profile:={args.profile} -p v_min:={float(spec.v_min)!r} -p v_max:={float(spec.v_max)!r}")
     print(f"wrote {out}: {', '.join(spec.parts)}, {ex.duration:.3f} s at {1 / spec.dt:g} Hz ({ex.u.size} samples), "
           f"{ex.u.min():.4g}..{ex.u.max():.4g} V; play it with: hyst_excite_node --ros-args "
-          f"-p rate:={1 / spec.dt:g} -p file:={out}", file=sys.stderr)
+          f"-p rate:={1 / spec.dt:g}{lims} -p file:={out}", file=sys.stderr)
     return 0

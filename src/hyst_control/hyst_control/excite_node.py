@@ -22,7 +22,8 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from sensor_msgs.msg import JointState
 
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
-from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
+from hyst_common.errors import ConfigError as CommonConfigError
+from hyst_common.profiles import CUSTOM_V_MAX, GMA_LIMITS, PEA_LIMITS, custom_limits
 
 from .errors import ControlError
 from .excitation import (DEFAULT_RATE, MAX_RATE, MIN_RATE, PARTS, Excitation, ExcitationSpec, build_excitation,
@@ -59,18 +60,32 @@ class ExciteNode(AtomicParametersNode):
     def _declare(self) -> None:
         d = self.declare_parameter
         ro = dict(read_only=True)
-        d("profile", "pea", ParameterDescriptor(description="limit defaults: pea (0-150 V) | gma (+-5 V)", **ro))
+        d("profile", "pea", ParameterDescriptor(
+            description="limit defaults: pea (0-150 V) | gma (+-5 V) | custom (another stage: set v_min and v_max)",
+            **ro))
         prof = self.get_parameter("profile").value
-        if prof not in ("pea", "gma"):
-            raise ControlError(f"profile must be pea or gma, got {prof!r}")
-        lim = GMA_LIMITS if prof == "gma" else PEA_LIMITS
+        if prof not in ("pea", "gma", "custom"):
+            raise ControlError(f"profile must be pea, gma or custom, got {prof!r}")
         s = ExcitationSpec()
         d("rate", DEFAULT_RATE, ParameterDescriptor(description="stage sample rate (Hz)",
                                                     floating_point_range=fp_range(MIN_RATE, MAX_RATE), **ro))
-        d("v_min", lim.v_min, ParameterDescriptor(description="lowest command (V), inside the profile",
-                                                  floating_point_range=fp_range(lim.v_min, lim.v_max), **ro))
-        d("v_max", lim.v_max, ParameterDescriptor(description="highest command (V), inside the profile",
-                                                  floating_point_range=fp_range(lim.v_min, lim.v_max), **ro))
+        if prof == "custom":  # no default range: the user names the amplifier's
+            box = (-CUSTOM_V_MAX, CUSTOM_V_MAX)
+            d("v_min", 0.0, ParameterDescriptor(description="lowest command (V) of the stage's amplifier",
+                                                floating_point_range=fp_range(*box), **ro))
+            d("v_max", 0.0, ParameterDescriptor(description="highest command (V) of the stage's amplifier",
+                                                floating_point_range=fp_range(*box), **ro))
+            try:
+                lim = custom_limits(self.get_parameter("v_min").value, self.get_parameter("v_max").value)
+            except CommonConfigError as err:
+                raise ControlError(f"profile custom needs v_min and v_max, the stage amplifier's range: {err}") \
+                    from err
+        else:
+            lim = GMA_LIMITS if prof == "gma" else PEA_LIMITS
+            d("v_min", lim.v_min, ParameterDescriptor(description="lowest command (V), inside the profile",
+                                                      floating_point_range=fp_range(lim.v_min, lim.v_max), **ro))
+            d("v_max", lim.v_max, ParameterDescriptor(description="highest command (V), inside the profile",
+                                                      floating_point_range=fp_range(lim.v_min, lim.v_max), **ro))
         d("slew_max", float(min(lim.slew_max, 1e9)), ParameterDescriptor(
             description="command slew limit (V/s)", floating_point_range=fp_range(1e-3, 1e9), **ro))
         d("parts", ",".join(s.parts), ParameterDescriptor(description=f"comma list of {', '.join(PARTS)}", **ro))

@@ -14,17 +14,17 @@ predicted output instead of the measurement — the inverse-model feedforward th
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from hyst_common.limits import CommandLimits
 from hyst_common.params import param
-from hyst_model.core import MBWParams, mbw_step
+from hyst_model.core import MBWParams, mbw_rest_state, mbw_step, pea_default
 
 from .base import BaseController, ModelBased, invert_nu
 from .errors import ConfigError
 from .notch import Notch
 
-__all__ = ["PIDGains", "PID", "OpenLoop"]
+__all__ = ["PIDGains", "PID", "OpenLoop", "gains_for", "static_gain"]
 
 
 @dataclass(frozen=True)
@@ -72,6 +72,28 @@ class PIDGains:
     def notch(self, dt: float) -> Notch | None:
         """The command notch these gains ask for at sample period ``dt`` (None without one)."""
         return Notch(self.notch_fn, self.notch_zeta_zero, self.notch_zeta_pole, dt) if self.notch_fn > 0 else None
+
+
+def static_gain(model: MBWParams, v_min: float, v_max: float) -> float:
+    """The model's quasi-static gain (m/V): rest displacement at ``v_max`` minus at ``v_min`` held, per volt
+    (:func:`hyst_model.core.mbw_rest_state`); NaN where the model has no finite rest there."""
+    p = model.vector
+    lo, hi = (mbw_rest_state(p, v / model.u_scale) for v in (v_min, v_max))
+    return float(model.y_scale * (hi - lo) / (v_max - v_min))
+
+
+def gains_for(model: MBWParams, v_min: float, v_max: float, gains: PIDGains | None = None) -> PIDGains:
+    """``gains`` (default :class:`PIDGains`) moved from the embedded PEA stage to a stage of ``model``: K_p and K_i
+    scaled by the PEA's static gain over 0–150 V over the model's over ``[v_min, v_max]``, so the loop gain — what
+    the defaults were tuned for — is the same (a ±10 V stage of 1.9 µm/V with the PEA's SI gains rang at ten times
+    it). Unchanged where the model's gain is not finite and positive."""
+    g = gains or PIDGains()
+    ref = static_gain(pea_default(), 0.0, 150.0)
+    own = static_gain(model, v_min, v_max)
+    if not (math.isfinite(own) and own > 0.0):
+        return g
+    k = ref / own
+    return replace(g, kp=g.kp * k, ki=g.ki * k, kd=g.kd * k)
 
 
 def _notch_key(g: PIDGains) -> tuple[float, float, float] | None:

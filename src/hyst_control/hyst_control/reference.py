@@ -15,6 +15,10 @@ the GMA (ch. 5.3.2). hyst scales every trajectory to the 30 µm PEA stroke and d
                 becomes 9 µm like the other references' ≈ 10 µm; the constant makes r(0) = 15 µm)
 ==============  ==================================================================================================
 
+On another stage, :func:`parse_reference` ``stroke=(lo, hi)`` places the same shapes on that stroke: offsets and
+default amplitudes scale with it (``sine:10`` on a ±19 µm stage swings ±12.7 µm about 0 — the same sixths of the
+stroke), while numbers given in a spec (``sine:F:A_um``, ``constant:LEVEL_um``) stay the absolute µm they say.
+
 Every reference provides its analytic rate (published as ``velocity[0]``), which lets the controller node
 extrapolate to the sample time its command will act at.
 """
@@ -28,9 +32,11 @@ import numpy as np
 
 from .errors import ReferenceError_
 
-__all__ = ["Reference", "parse_reference", "SHAPES", "TABLE_REFERENCES"]
+__all__ = ["Reference", "parse_reference", "SHAPES", "TABLE_REFERENCES", "PEA_STROKE"]
 
 UM = 1e-6
+#: The stroke (m) the documented defaults are placed on: the PEA's 30 µm from rest at 0 V.
+PEA_STROKE = (0.0, 30 * UM)
 
 #: Shapes understood by :func:`parse_reference` / the reference node's ``shape`` parameter.
 SHAPES = ("step", "ramp", "step+ramp", "sine", "c1", "c2", "c3", "case3", "constant")
@@ -162,9 +168,12 @@ _DEFAULTS: dict[str, _Shape] = {
 }
 
 
-def parse_reference(spec: str) -> Reference:
+def parse_reference(spec: str, stroke: tuple[float, float] | None = None) -> Reference:
     """Build a reference from a short spec: ``step``, ``ramp``, ``step+ramp``, ``sine:F[:A_um]``, ``c1``,
     ``c2``, ``c3``, ``case3``, ``constant[:LEVEL_um]``.
+
+    ``stroke`` (m, low < high) places the default offsets and amplitudes on another stage's stroke as they sit on
+    :data:`PEA_STROKE`; numbers in the spec are absolute µm.
 
     Raises
     ------
@@ -179,6 +188,13 @@ def parse_reference(spec: str) -> Reference:
         raise ReferenceError_(f"unknown reference {spec!r}; use step, ramp, step+ramp, sine:F[:A_um], c1, c2, "
                               "c3, case3 or constant[:LEVEL_um]")
     kw = _DEFAULTS[shape].copy()
+    if stroke is not None:
+        lo, hi = (float(v) for v in stroke)
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ReferenceError_(f"stroke must be finite (low, high) with low < high (m), got {stroke!r}")
+        k = (hi - lo) / (PEA_STROKE[1] - PEA_STROKE[0])
+        kw["offset"] = lo + (kw["offset"] - PEA_STROKE[0]) * k
+        kw["amplitude"] = kw["amplitude"] * k
     shape = "step+ramp" if shape == "stepramp" else shape
     try:
         nums = [float(x) for x in parts[1:]]

@@ -39,6 +39,9 @@ def _gma_slew() -> float:
     (["--f-hi", "900", "--rate", "1000"], "Nyquist"),
     (["--amplitudes", "0.5,x"], "comma list of numbers"),
     (["--rate", "0"], "--rate"),
+    (["--profile", "custom", "--v-max", "10"], "--profile custom needs --v-min and --v-max"),
+    (["--profile", "custom", "--v-min", "-2000", "--v-max", "10"], "within ±1000 V"),
+    (["--profile", "custom", "--v-min", "5", "--v-max", "-5"], "v_min < v_max"),
 ])
 def test_bad_arguments_are_one_line_exit_2_and_write_nothing(tmp_path, capsys, extra, why):
     out = tmp_path / "u.csv"
@@ -55,3 +58,18 @@ def test_an_existing_file_is_kept_without_force(tmp_path, capsys):
     assert out.read_text() == "mine\n" and "--force" in capsys.readouterr().err
     assert hyst(["excite", "--out", str(out), "--force", "--parts", "steps"]) == 0
     assert out.read_text().startswith("t,u\n")
+
+
+def test_a_custom_range_for_another_stage_is_written_and_the_play_command_names_it(tmp_path, capsys):
+    """A ±10 V stage is neither profile: ``--profile custom`` takes its range; the rest is 0 V, the centre."""
+    out = tmp_path / "u.csv"
+    rc = hyst(["excite", "--out", str(out), "--profile", "custom", "--v-min", "-10", "--v-max", "10",
+               "--parts", "steps,sines", "--json"])
+    assert rc == 0
+    cap = capsys.readouterr()
+    desc = json.loads(cap.out)
+    t, u = read_input_csv(out)
+    assert -10.0 <= u.min() < -5.0 and 5.0 < u.max() <= 10.0 and desc["rest"] == 0.0 and u[0] == u[-1] == 0.0
+    slew = np.max(np.abs(np.diff(u))) / (t[1] - t[0])
+    assert slew <= 20.0 / 1e-3 * (1 + 1e-9)      # the default: a full swing in no less than 1 ms
+    assert "-p profile:=custom -p v_min:=-10.0 -p v_max:=10.0" in cap.err   # what the node must be told

@@ -46,3 +46,25 @@ def test_c2_sweeps_frequency_continuously():
 def test_bad_specs_get_a_clear_error(bad):
     with pytest.raises(ReferenceError_):
         parse_reference(bad)
+
+
+@pytest.mark.parametrize("spec", ["step", "ramp", "step+ramp", "sine:10", "c1", "c2", "c3", "case3", "constant"])
+def test_a_reference_on_another_stroke_sits_on_the_same_fractions_of_it(spec):
+    """``stroke=(lo, hi)``: the same shape on the same fractions of a ±20 µm stroke as of the PEA's 30 µm."""
+    from hyst_control.reference import PEA_STROKE
+
+    t = np.linspace(0.0, 4.0, 8001)
+    pea = parse_reference(spec)(t)
+    assert np.array_equal(parse_reference(spec, stroke=PEA_STROKE)(t), pea)   # the PEA stroke changes nothing
+    lo, hi = -20e-6, 20e-6
+    other = parse_reference(spec, stroke=(lo, hi))(t)
+    np.testing.assert_allclose((other - lo) / (hi - lo), pea / 30e-6, atol=1e-12)
+
+
+def test_numbers_in_a_spec_stay_absolute_on_another_stroke_and_a_bad_stroke_is_refused():
+    r = parse_reference("sine:5:2", stroke=(-20e-6, 20e-6))
+    assert r.amplitude == pytest.approx(2e-6) and r.offset == pytest.approx(0.0)
+    assert parse_reference("constant:3", stroke=(-20e-6, 20e-6)).offset == pytest.approx(3e-6)
+    for bad in ((1e-6, 1e-6), (float("nan"), 1e-6)):
+        with pytest.raises(ReferenceError_, match="stroke"):
+            parse_reference("sine:5", stroke=bad)

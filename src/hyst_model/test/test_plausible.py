@@ -31,6 +31,14 @@ def test_each_unit_mistake_is_named(what, change, words):
     assert len(w) == 1 and words in w[0], (what, w)
 
 
+def test_another_stages_range_is_no_unit_mistake_but_millivolts_of_it_are():
+    t, u, y = _record()
+    for v in ((u - 75) / 7.5, u * 4 / 3, (u - 75) * 4):   # ±10 V, 0–200 V, ±300 V stages: beyond the rig's two
+        assert plausibility(t, v, y) == [], v.max()
+    w = plausibility(t, (u - 75) / 7.5 * 1000, y)          # the ±10 V stage's input in mV read as V
+    assert len(w) == 1 and "mV read as volts" in w[0]
+
+
 def test_input_range_only_checked_for_volts():
     t, u, y = _record()
     assert plausibility(t, u * 1000, y, input_unit="N") == []

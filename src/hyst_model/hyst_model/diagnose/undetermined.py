@@ -118,14 +118,17 @@ def sentence(items: list[Undetermined], noise: float, dt: float | None = None,
                          f"({x.rmse / noise:.2f}× the noise floor)" for x in alike)
         parts.append(f"this record does not tell {alike[0].against} from: {what}")
     return ("; ".join(parts) + "; record steps with holds, band-limited noise or a sweep over the range to tell "
-            f"them apart ({excite_command(dt, u_range)} writes one; hyst_excite_node -p file:= plays it)")
+            f"them apart ({excite_command(dt, u_range)} writes one and prints the hyst_excite_node command that "
+            "plays it)")
 
 
 def excite_command(dt: float | None, u_range: tuple[float, float] | None) -> str:
-    """The ``hyst excite`` command for a record like this one: its rate and, where the record's input lies inside
-    an amplifier profile's range (PEA 0–150 V, GMA ±5 V), that profile and the record's reach (a stage is excited
-    where it was identified), keeping the profile's rest voltage — 0 V, from which ``hyst_excite_node`` starts — so
-    the node plays the file with its defaults. Without them, the generic command."""
+    """The ``hyst excite`` command for a record like this one: its rate and its input's reach (a stage is excited
+    where it was identified). Inside an amplifier profile's range (PEA 0–150 V, GMA ±5 V) it names that profile
+    and keeps the profile's rest voltage — 0 V, from which ``hyst_excite_node`` starts — so the node plays the file
+    with its defaults; a record beyond both (another stage, e.g. ±10 V) gets ``--profile custom`` with the
+    record's own range (never a profile's default range, which could drive that stage beyond what it was
+    driven). Without a range, the generic command."""
     cmd = "hyst excite --parts steps,noise,sweep"
     if dt is not None and np.isfinite(dt) and dt >= 1e-5:
         cmd += f" --rate {1.0 / dt:.6g}"
@@ -136,4 +139,7 @@ def excite_command(dt: float | None, u_range: tuple[float, float] | None) -> str
             cmd += f" --profile pea --v-max {0.9999 * hi:.6g}"
         elif -5.0 <= lo < 0.0 < hi <= 5.0:
             cmd += f" --profile gma --v-min {-reach:.6g} --v-max {reach:.6g}"
+        elif np.isfinite(lo) and np.isfinite(hi) and lo < hi:
+            pad = 1e-4 * (hi - lo)  # inward, as above
+            cmd += f" --profile custom --v-min {lo + pad:.6g} --v-max {hi - pad:.6g}"
     return cmd + " --out excite.csv"

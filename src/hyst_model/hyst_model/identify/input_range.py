@@ -15,7 +15,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-__all__ = ["identified_range", "range_note", "output_note", "TOLERANCE", "OUTPUT_SPANS"]
+__all__ = ["identified_range", "stored_range", "range_note", "output_note", "TOLERANCE", "OUTPUT_SPANS"]
 
 #: Share of the identified span an input may pass either end by before the note: the excitation of a new record
 #: rarely repeats the identification's extremes exactly, and a few % beyond them is still the same operating range.
@@ -47,6 +47,12 @@ def _stored(fit: Mapping, key: str) -> tuple[float, float] | None:
     if not isinstance(lo, (int, float)) or not isinstance(hi, (int, float)) or not hi >= lo:
         return None
     return float(lo), float(hi)
+
+
+def stored_range(fit: Mapping, key: str = "u") -> tuple[float, float] | None:
+    """``(min, max)`` of the input (``key="u"``, V) or measured output (``"y"``, m) a params file's provenance
+    ``fit`` records, or None where it records none (an older file, a bad entry)."""
+    return _stored(fit, key)
 
 
 def _beyond(v, lo: float, hi: float, slack: float) -> tuple[np.ndarray, np.ndarray] | None:

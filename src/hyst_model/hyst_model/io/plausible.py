@@ -4,8 +4,10 @@ A displacement in µm read as metres fits without complaint (a 4 041 482 nm RMSE
 give a 2 Hz record. Nothing here refuses data — the rig may be unusual — but each implausible figure is named
 with the likely cause and the option that fixes it, on stderr, before the fit.
 
-The limits are the rig's two stages (:mod:`hyst_common.profiles`, which the driver, the sim and the controller
-share): PEA 0…150 V, 30 µm; GMA ±5 V, ±20 µm.
+The stroke limit is the rig's two stages' (:mod:`hyst_common.profiles`, which the driver, the sim and the
+controller share): PEA 30 µm, GMA ±20 µm. An input beyond both amplifiers (PEA 0…150 V, GMA ±5 V) is not by itself
+a mistake — another stage may be driven from ±10 V or 200 V — so only an input beyond :data:`INPUT_MAX` is named
+(millivolts read as volts: a PEA's 150 V reads 150 000, a GMA's ±5 V ±5 000).
 """
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ import numpy as np
 
 from hyst_common.profiles import PROFILES, V_SPAN
 
-__all__ = ["plausibility", "STROKE_MAX", "V_RANGE", "RATE_RANGE", "STROKE_FACTOR"]
+__all__ = ["plausibility", "STROKE_MAX", "V_RANGE", "INPUT_MAX", "RATE_RANGE", "STROKE_FACTOR"]
 
 #: Largest stroke of the rig's stages (m): GMA ±20 µm.
 STROKE_MAX = max(p.stroke for p in PROFILES.values())
@@ -21,6 +23,9 @@ STROKE_MAX = max(p.stroke for p in PROFILES.values())
 STROKE_FACTOR = 100.0
 #: Widest amplifier range of the rig's stages (V): GMA −5 V … PEA 150 V.
 V_RANGE = V_SPAN
+#: Largest input magnitude (V) of a plausible smart-material amplifier input: high-voltage piezo amplifiers reach
+#: about 1 kV; beyond it the column is taken for millivolts.
+INPUT_MAX = 1000.0
 #: Plausible sample rates (Hz) for a positioning record.
 RATE_RANGE = (10.0, 100e3)
 
@@ -52,7 +57,8 @@ def plausibility(t: np.ndarray, u: np.ndarray, y: np.ndarray, input_unit: str = 
                    f"({STROKE_MAX * 1e6:g} µm): is it in µm or nm read as metres? give the unit, e.g. --units s,V,um")
     if input_unit in ("V", "v") and u.size:
         lo, hi = float(np.min(u)), float(np.max(u))
-        if lo < 1.1 * V_RANGE[0] - 1.0 or hi > 1.1 * V_RANGE[1]:
-            out.append(f"the input reaches {lo:.4g} … {hi:.4g} V, beyond both amplifiers (PEA 0 … 150 V, GMA ±5 V): "
-                       "is it in mV read as volts, or not the amplifier's input? give the unit, e.g. --units s,mV,um")
+        if max(abs(lo), abs(hi)) > INPUT_MAX:
+            out.append(f"the input reaches {lo:.4g} … {hi:.4g} V, beyond any smart-material amplifier's "
+                       f"{INPUT_MAX:g} V (the rig's: PEA 0 … 150 V, GMA ±5 V): is it in mV read as volts, or not "
+                       "the amplifier's input? give the unit, e.g. --units s,mV,um")
     return out
