@@ -29,6 +29,8 @@ import sys
 
 from pathlib import Path
 
+import numpy as np
+
 from hyst_control.compensation import Compensation, from_params
 from hyst_control.controller_settings import model_divergence
 from hyst_control.controllers import ALGORITHMS, CONTROLLERS, make_controller, make_supervised, mismatched
@@ -50,7 +52,10 @@ from hyst_sim.truth_effects import Dynamics
 
 from .loop import SimPlant, default_plant, run_closed_loop
 
-__all__ = ["register", "run"]
+__all__ = ["register", "run", "AT_END_SHARE"]
+
+#: Share of a run's commands on the range's ends beyond which the reference is said to leave the stage's reach.
+AT_END_SHARE = 0.01
 
 
 def register(subparsers) -> None:
@@ -271,6 +276,13 @@ def run(args: argparse.Namespace) -> int:
                            compensation=comp, act=args.stability != "warn")
     res = run_closed_loop(ctrl, ref, args.seconds, plant=plant)
     out = res.summary()
+    tol = 1e-6 * (limits.v_max - limits.v_min)
+    at_end = float(np.mean((res.u <= limits.v_min + tol) | (res.u >= limits.v_max - tol)))
+    out.update(at_range_end=at_end)
+    if at_end > AT_END_SHARE:  # the error is then the stage's reach, not the law's
+        print(f"hyst track: warning: the commands sat on the range's ends ({limits.v_min:g} or {limits.v_max:g} V) "
+              f"for {at_end:.0%} of the run: the reference asks for more than the stage reaches at this speed; "
+              "lower its amplitude (sine:F:A_um) or frequency", file=sys.stderr)
     beyond = range_note(spec.fit, res.u) if spec is not None else None  # the model extrapolates there
     if beyond:
         out.update(range_warning=beyond)

@@ -82,3 +82,12 @@ def test_stage_errors_are_one_line_and_exit_2(extra, why, capsys, tmp_path):
     assert main(["track", *[sub.get(a, a) for a in extra], "--seconds", "0.1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and why in err[0], err
+
+
+def test_a_reference_beyond_the_stages_reach_is_said_to_be(capsys):
+    """14 µm at 10 Hz about 15 µm asks the embedded stage for more than 0–150 V gives: the commands sit on the
+    ends and the error is the stage's reach, not the law's; the default 10 µm stays inside."""
+    out, err = _track(capsys, "--reference", "sine:10:14", "--seconds", "0.5")
+    assert out["at_range_end"] > 0.01 and "reaches at this speed" in err
+    out, err = _track(capsys, "--reference", "sine:10", "--seconds", "0.5")
+    assert out["at_range_end"] == 0.0 and "reaches at this speed" not in err

@@ -24,7 +24,7 @@ from .base import BaseController, ModelBased, invert_nu
 from .errors import ConfigError
 from .notch import Notch
 
-__all__ = ["PIDGains", "PID", "OpenLoop", "gains_for", "static_gain"]
+__all__ = ["PIDGains", "PID", "OpenLoop", "gains_for", "static_gain", "feed_through"]
 
 
 @dataclass(frozen=True)
@@ -82,18 +82,32 @@ def static_gain(model: MBWParams, v_min: float, v_max: float) -> float:
     return float(model.y_scale * (hi - lo) / (v_max - v_min))
 
 
+def feed_through(model: MBWParams) -> float:
+    """The model's one-sample gain (m/V) about rest: ∂y_k/∂u_k of (3.21) at y = 0 and a slow input, ζ1 scaled."""
+    return float(model.y_scale * model.zeta1 / model.u_scale)
+
+
 def gains_for(model: MBWParams, v_min: float, v_max: float, gains: PIDGains | None = None) -> PIDGains:
-    """``gains`` (default :class:`PIDGains`) moved from the embedded PEA stage to a stage of ``model``: K_p and K_i
-    scaled by the PEA's static gain over 0–150 V over the model's over ``[v_min, v_max]``, so the loop gain — what
-    the defaults were tuned for — is the same (a ±10 V stage of 1.9 µm/V with the PEA's SI gains rang at ten times
-    it). Unchanged where the model's gain is not finite and positive."""
+    """``gains`` (default :class:`PIDGains`) moved from the embedded PEA stage to a stage of ``model``.
+
+    K_p, K_i and K_d are scaled so that neither loop gain they were tuned for grows: the static one (the PEA's
+    static gain over 0–150 V against the model's over ``[v_min, v_max]``, :func:`static_gain`) nor the one-sample
+    one (:func:`feed_through`), which sets the loop near the Nyquist rate — the smaller factor of the two. About
+    rest the MBW is the lead-lag ζ1(1 − δ2 z⁻¹)/(1 − δ1 z⁻¹), so a stage with a quicker memory (smaller δ1) than
+    the PEA's has a feed-through above its static gain and rings at gains scaled by the static gain alone. A ±10 V
+    stage of 1.9 µm/V with the PEA's SI gains rang at ten times their loop gain. Unchanged where a gain of the
+    model is not finite and positive.
+    """
     g = gains or PIDGains()
-    ref = static_gain(pea_default(), 0.0, 150.0)
-    own = static_gain(model, v_min, v_max)
-    if not (math.isfinite(own) and own > 0.0):
-        return g
-    k = ref / own
-    return replace(g, kp=g.kp * k, ki=g.ki * k, kd=g.kd * k)
+    pea = pea_default()
+    k = []
+    for own, ref in ((static_gain(model, v_min, v_max), static_gain(pea, 0.0, 150.0)),
+                     (feed_through(model), feed_through(pea))):
+        if not (math.isfinite(own) and own > 0.0):
+            return g
+        k.append(ref / own)
+    f = min(k)
+    return replace(g, kp=g.kp * f, ki=g.ki * f, kd=g.kd * f)
 
 
 def _notch_key(g: PIDGains) -> tuple[float, float, float] | None:

@@ -34,6 +34,14 @@ def test_round_trip_rebuilds_the_same_model(tmp_path):
     assert back.fit["method"] == "fast" and back.parameters()["model.zeta1"] == 0.4029
 
 
+def test_a_sample_time_from_float_differences_is_written_as_the_period_it_is():
+    m, theta, _ = _spec()
+    dt = float(np.median(np.diff(np.arange(20000) * 1e-3)))  # a record's median sample spacing
+    assert dt != 1e-3
+    assert spec_from_model(m, theta, dt=dt).config["dt"] == 1e-3
+    assert spec_from_model(m, theta, dt=1 / 3000).config["dt"] == pytest.approx(1 / 3000, rel=1e-11)
+
+
 def test_never_overwrites_without_force_and_leaves_no_temporaries(tmp_path):
     _, _, spec = _spec()
     p = tmp_path / "p.yaml"

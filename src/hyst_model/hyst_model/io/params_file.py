@@ -112,8 +112,8 @@ def spec_from_model(model: Model, theta, *, fit: Mapping | None = None, dt: floa
     base = getattr(model, "base", model)
     effects = [getattr(e, "name", str(e)) for e in getattr(model, "effects", [])]
     config = dict(model.config())
-    if dt is not None:
-        config["dt"] = float(dt)
+    if dt is not None:  # a median of float differences: 0.0009999999999998899 is 1 ms, written as such
+        config["dt"] = float(f"{float(dt):.12g}")
     values = {k: float(v) for k, v in model.unpack(np.asarray(theta, dtype=np.float64)).items()}
     return ParamsSpec(str(base.name), effects, values, config, dict(fit or {}))
 
