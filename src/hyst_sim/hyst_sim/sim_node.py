@@ -55,8 +55,8 @@ from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .errors import SimError
 from .plant import Plant
-from hyst_common.profiles import V_SPAN, get_profile
-from .sim_settings import SimSettings, plant_config
+from hyst_common.profiles import CUSTOM_V_MAX, PEA, V_SPAN, get_profile
+from .sim_settings import custom_slew, SimSettings, plant_config
 from .truth_effects import EFFECT_NAMES, Effects
 
 __all__ = ["SimNode", "SimSettings", "plant_config", "main"]
@@ -128,22 +128,28 @@ class SimNode(AtomicParametersNode):
     # Parameters ---------------------------------------------------------------------------------------------
     def _declare_parameters(self) -> None:
         d = self.declare_parameter
-        d("profile", "pea", ParameterDescriptor(description="actuator profile: pea (0-150 V) | gma (+-5 V)",
-                                                additional_constraints="one of: pea, gma"))
-        prof = get_profile(self.get_parameter("profile").value)
+        d("profile", "pea", ParameterDescriptor(
+            description="actuator profile: pea (0-150 V) | gma (+-5 V) | custom (another stage: needs params_file, "
+                        "v_min and v_max)", additional_constraints="one of: pea, gma, custom"))
+        name = self.get_parameter("profile").value
+        custom = name == "custom"
+        prof = PEA if custom else get_profile(name)  # custom: the rig's sensor; no default range
+        box = (-CUSTOM_V_MAX, CUSTOM_V_MAX) if custom else V_SPAN
         d("rate", 1000.0, ParameterDescriptor(description="sample rate (Hz); 2000 needs a single process",
                                               floating_point_range=fp_range(1.0, 5000.0)))
-        d("v_min", prof.v_min, ParameterDescriptor(description="lowest voltage applied (V), inside the profile",
-                                                   floating_point_range=fp_range(*V_SPAN)))
-        d("v_max", prof.v_max, ParameterDescriptor(description="highest voltage applied (V), inside the profile",
-                                                   floating_point_range=fp_range(*V_SPAN)))
-        d("slew_max", prof.slew_max, ParameterDescriptor(description="amplifier slew limit (V/s)",
-                                                         floating_point_range=fp_range(1e-3, 1e8)))
+        d("v_min", 0.0 if custom else prof.v_min, ParameterDescriptor(
+            description="lowest voltage applied (V), inside the profile", floating_point_range=fp_range(*box)))
+        d("v_max", 0.0 if custom else prof.v_max, ParameterDescriptor(
+            description="highest voltage applied (V), inside the profile", floating_point_range=fp_range(*box)))
+        lo, hi = (float(self.get_parameter(n).value) for n in ("v_min", "v_max"))
+        slew = custom_slew(lo, hi) if custom else prof.slew_max
+        d("slew_max", slew, ParameterDescriptor(description="amplifier slew limit (V/s)",
+                                                floating_point_range=fp_range(1e-3, 1e8)))
         d("command_timeout", 0.2, ParameterDescriptor(
             description="no command for this long (s) -> ramp to v_safe (realtime mode)",
             floating_point_range=fp_range(1e-3, 3600.0)))
-        d("v_safe", prof.v_safe, ParameterDescriptor(description="voltage at start and after a timeout (V)",
-                                                     floating_point_range=fp_range(*V_SPAN)))
+        d("v_safe", min(max(0.0, lo), hi) if custom else prof.v_safe, ParameterDescriptor(
+            description="voltage at start and after a timeout (V)", floating_point_range=fp_range(*box)))
         d("safe_ramp_rate", 100.0, ParameterDescriptor(description="ramp rate towards v_safe after a timeout (V/s)",
                                                        floating_point_range=fp_range(1e-3, 1e8)))
         d("frame_id", "stage", ParameterDescriptor(description="header.frame_id of /stage/state"))
@@ -433,7 +439,8 @@ def usage() -> str:
     """Help text: the module description and every parameter with its range (from the one declaration table)."""
     lines = ["usage: hyst_sim_node [--ros-args -p NAME:=VALUE ...]", "", __doc__.split("\n\nModes")[0].strip(), "",
              "parameters (shared with the driver unless marked sim):",
-             "  rate [Hz] 1000 (1..5000)   profile pea|gma   v_min, v_max, v_safe [V] (profile defaults)",
+             "  rate [Hz] 1000 (1..5000)   profile pea|gma|custom (sim: another stage, with params_file, v_min,",
+             "  v_max)   v_min, v_max, v_safe [V] (profile defaults)",
              "  slew_max [V/s]   command_timeout [s] 0.2   safe_ramp_rate [V/s] 100 (sim)   frame_id 'stage'",
              "  mode realtime|lockstep (sim)   wait_for_subscribers (sim, lockstep) 1   params_file (sim)",
              "  scenario_file (sim, hidden)   seed (sim)",

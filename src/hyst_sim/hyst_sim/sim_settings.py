@@ -6,10 +6,18 @@ from typing import Any
 
 from .errors import SimError
 from .plant import PlantConfig
-from hyst_common.profiles import get_profile
+from hyst_common.errors import ConfigError
+from hyst_common.profiles import CUSTOM_SWING_TIME, custom_limits, get_profile
 from .scenario import load_scenario
 
-__all__ = ["SimSettings", "plant_config"]
+__all__ = ["SimSettings", "plant_config", "custom_slew"]
+
+
+def custom_slew(v_min: float, v_max: float) -> float:
+    """Default slew limit (V/s) of a ``custom`` stage: a full swing in ``CUSTOM_SWING_TIME`` (1e4 V/s before a
+    range is given)."""
+    span = v_max - v_min
+    return span / CUSTOM_SWING_TIME if span > 0 else 1e4
 
 
 @dataclass(frozen=True)
@@ -37,10 +45,19 @@ class SimSettings:
 
     def validate(self) -> None:
         """Raise :class:`SimError` with a reason for inconsistent values (ranges are checked by ROS)."""
-        prof = get_profile(self.profile)
-        if not (prof.v_min <= self.v_min < self.v_max <= prof.v_max):
-            raise SimError(f"need {prof.v_min} <= v_min < v_max <= {prof.v_max} V for profile {prof.name!r}, got "
-                           f"v_min={self.v_min}, v_max={self.v_max} (set them in the same call as profile)")
+        if self.profile == "custom":  # another stage: its model and range are the user's
+            if not self.params_file:
+                raise SimError("profile custom needs params_file: the stage's model (hyst fit --out)")
+            try:
+                custom_limits(self.v_min, self.v_max, self.slew_max)
+            except ConfigError as err:
+                raise SimError(f"profile custom needs v_min and v_max, the stage amplifier's range: {err}") \
+                    from err
+        else:
+            prof = get_profile(self.profile)
+            if not prof.v_min <= self.v_min < self.v_max <= prof.v_max:
+                raise SimError(f"need {prof.v_min} <= v_min < v_max <= {prof.v_max} V for profile {prof.name!r}, "
+                               f"got v_min={self.v_min}, v_max={self.v_max} (set them in the same call as profile)")
         if not self.v_min <= self.v_safe <= self.v_max:
             raise SimError(f"v_safe = {self.v_safe} V must lie in [v_min, v_max] = [{self.v_min}, {self.v_max}] V")
         if self.mode not in ("realtime", "lockstep"):
@@ -51,8 +68,9 @@ def plant_config(s: SimSettings) -> PlantConfig:
     """The plant a settings object describes: profile or params file, limits, effects, then the scenario."""
     common: dict[str, Any] = dict(sensor=False, seed=s.seed, v_min=s.v_min, v_max=s.v_max, slew_max=s.slew_max,
                                   v_init=s.v_safe)
-    if s.params_file:
-        cfg = PlantConfig.from_params_file(s.params_file, s.profile, s.rate, **common)
+    if s.params_file:  # a custom stage takes the rig's sensor defaults; its range is in ``common``
+        base = ("gma" if s.v_min < 0.0 < s.v_max else "pea") if s.profile == "custom" else s.profile
+        cfg = PlantConfig.from_params_file(s.params_file, base, s.rate, **common)
     else:
         cfg = PlantConfig.for_profile(s.profile, s.rate, **common)
     cfg = cfg.with_strengths(**dict(s.effects))
