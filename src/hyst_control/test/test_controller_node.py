@@ -279,3 +279,19 @@ def test_an_in_process_reference_is_sampled_exactly_at_each_state(harness, in_pr
         assert st["rmse"] < 1e-12
     else:
         assert st["rmse"] > 5e-8
+
+
+def test_pid_defaults_keep_the_peas_loop_gain_on_the_start_up_model(harness):
+    """The SI defaults are the PEA's; on the GMA profile (4 µm/V, 20× the PEA's) they are declared a 20th, and an
+    explicit value is the user's."""
+    from hyst_control.pid import PIDGains, gains_for
+    from hyst_model.core import stage_model
+
+    pea, *_ = harness()
+    assert pea.get_parameter("pid.kp").value == PIDGains().kp and pea.get_parameter("pid.ki").value == PIDGains().ki
+    gma, *_ = harness("-p", "profile:=gma")
+    want = gains_for(stage_model("gma"), -5.0, 5.0)
+    assert gma.get_parameter("pid.kp").value == pytest.approx(want.kp) and 0.03 < want.kp / PIDGains().kp < 0.07
+    assert gma.get_parameter("pid.ki").value == pytest.approx(want.ki)
+    mine, *_ = harness("-p", "profile:=gma", "-p", "pid.kp:=123456.0")
+    assert mine.get_parameter("pid.kp").value == 123456.0
