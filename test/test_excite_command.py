@@ -16,7 +16,7 @@ from hyst_model.io.csvio import read_input_csv
 
 @pytest.mark.parametrize("u_range,profile", [
     ((0.0, 120.0), "pea"), ((-4.0, 4.5), "gma"), ((-10.0, 10.0), "custom"), ((0.0, 200.0), "custom"),
-    ((-3.0, 9.0), "custom"), ((20.0, 140.0), "pea"),
+    ((-3.0, 9.0), "custom"), ((20.0, 140.0), "pea"), ((0.5, 150.0), "pea"), ((-120.0, -20.0), "custom"),
 ])
 def test_the_advised_excitation_runs_and_stays_inside_the_records_range(tmp_path, capsys, u_range, profile):
     cmd = excite_command(1e-3, u_range)
@@ -27,8 +27,8 @@ def test_the_advised_excitation_runs_and_stays_inside_the_records_range(tmp_path
     assert hyst(argv) == 0, capsys.readouterr().err
     t, u = read_input_csv(out)
     lo, hi = u_range
-    # the record's reach for a bipolar profile, its top for the PEA (whose rest, 0 V, may lie below the record)
-    assert u.max() <= hi and u.min() >= (min(lo, 0.0) if profile == "pea" else -max(abs(lo), hi))
+    # the record's reach for a bipolar profile, its own range for the PEA and another stage
+    assert u.max() <= hi and u.min() >= ((lo if lo > 1.5 else 0.0) if profile == "pea" else -max(abs(lo), hi))
     if profile == "custom":
         assert lo <= u.min() and u.max() <= hi
         assert u.max() - u.min() > 0.5 * (hi - lo)          # it does use the range

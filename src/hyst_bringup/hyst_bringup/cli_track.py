@@ -13,9 +13,10 @@ scenario (a file, or the name of one shipped with hyst_sim, e.g. ``hidden_creep`
 ``--stage`` says which stage is simulated: ``embedded`` (the PEA stage, 0–150 V), or ``params`` — the params
 file's own stage: its base MBW, scales and ``dt`` as the truth, driven over the input range it was identified on
 (``fit.u_min``..``fit.u_max``, or ``--v-min``/``--v-max``), slew limit a full swing in 1 ms. The default ``auto`` is
-``params`` when the file's identified range is not inside 0–150 V (a GMA's ±5 V, a ±10 V stage: the PEA stage
-would be driven where that model knows nothing), else ``embedded``. On the params stage the commands are limited to
-its range, the divergence check uses it, and the reference is placed on its stroke
+``embedded`` only when the file's identified range is the PEA's (inside 0–150 V, from its lowest to its highest
+tenth, as a fit of the embedded stage is) or it records none (said), else ``params`` (a GMA's ±5 V, a ±10 V or a
+20–120 V stage: the PEA stage would be driven where that model knows nothing). On the params stage the commands
+are limited to its range, the divergence check uses it, and the reference is placed on its stroke
 (:func:`hyst_control.reference.parse_reference` ``stroke``). Whatever the stage, commands beyond the range the
 controller's model was identified on are reported (:func:`hyst_model.identify.input_range.range_note`).
 """
@@ -97,8 +98,8 @@ def register(subparsers) -> None:
                         "default: the embedded stage")
     p.add_argument("--stage", choices=("auto", "embedded", "params"), default="auto",
                    help="simulated stage: embedded (the PEA, 0-150 V), params (the --params file's own model, over "
-                        "its identified input range) or auto (default): params when that range is not inside "
-                        "0-150 V, else embedded")
+                        "its identified input range) or auto (default): embedded when that range is the PEA's "
+                        "(inside 0-150 V, from its lowest to its highest tenth) or none is recorded, else params")
     p.add_argument("--v-min", type=float, default=None,
                    help="--stage params: lowest command (V), default the file's identified fit.u_min")
     p.add_argument("--v-max", type=float, default=None,
@@ -107,8 +108,9 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _gains(args: argparse.Namespace, classes: dict):
-    """The algorithm's gains with ``--gain`` overrides and ``--thesis-rate`` applied (None = defaults)."""
+def _gains(args: argparse.Namespace, classes: dict, base=None):
+    """The algorithm's gains with ``--gain`` overrides and ``--thesis-rate`` applied over ``base`` (default the
+    law's defaults); None = the law's defaults unchanged."""
     cls = classes.get(args.algorithm)
     if cls is None:
         if args.gain:
@@ -126,6 +128,8 @@ def _gains(args: argparse.Namespace, classes: dict):
             raise ConfigError(f"--gain {item!r}: a number is expected") from None
     if args.thesis_rate and "exact_rate" in names:
         kw["exact_rate"] = False
+    if base is not None:
+        return dataclasses.replace(base, **kw)
     return cls(**kw) if kw else None
 
 
@@ -157,11 +161,20 @@ def _which_stage(args: argparse.Namespace, spec) -> str:
         raise ConfigError("--stage params needs --params (the stage's model)")
     if args.stage == "params":
         return "params"
-    rng = stored_range(spec.fit, "u")
-    inside = rng is not None and PEA_LIMITS.v_min <= rng[0] and rng[1] <= PEA_LIMITS.v_max
     if args.v_min is not None or args.v_max is not None:
         return "params"
-    return "embedded" if inside or rng is None else "params"
+    rng = stored_range(spec.fit, "u")
+    if rng is None:  # nothing says it is another stage (said after the run, since it may be)
+        return "embedded"
+    return "embedded" if _pea_range(*rng) else "params"
+
+
+def _pea_range(lo: float, hi: float) -> bool:
+    """True when an identified input range is the PEA's: inside 0-150 V, from its lowest to its highest tenth
+    (as a fit of the embedded stage on its excitation is); a 20-120 V stage is another stage."""
+    span = PEA_LIMITS.v_max - PEA_LIMITS.v_min
+    return (PEA_LIMITS.v_min <= lo <= PEA_LIMITS.v_min + 0.1 * span
+            and PEA_LIMITS.v_max - 0.1 * span <= hi <= PEA_LIMITS.v_max)
 
 
 def _stage_limits(args: argparse.Namespace, spec, path: str) -> CommandLimits:
@@ -244,15 +257,15 @@ def run(args: argparse.Namespace) -> int:
     else:
         model = pea_default()
     model = mismatched(model, args.mismatch) if args.mismatch else model
-    gains = _gains(args, {name: law.gains for name, law in CONTROLLERS.items() if law.gains is not None})
+    # the PID's SI defaults are the PEA's: on another stage they start from its loop gain, --gain on top of that
+    scaled = gains_for(model, limits.v_min, limits.v_max) if stage == "params" and args.algorithm == "pid" else None
+    gains = _gains(args, {name: law.gains for name, law in CONTROLLERS.items() if law.gains is not None}, scaled)
     if args.scenario:
         plant = _plant(args.scenario, args.rate, args.seed, base_cfg)
     else:
         plant = SimPlant(Plant(base_cfg)) if base_cfg is not None else default_plant(args.rate, args.seed)
     # the documented references sit on the PEA's stroke; another stage gets them on its own
     ref = parse_reference(args.reference, stroke=plant.plant.stroke_range if stage == "params" else None)
-    if stage == "params" and args.algorithm == "pid" and gains is None:  # the default SI gains are the PEA's:
-        gains = gains_for(model, limits.v_min, limits.v_max)               # keep the loop gain they were tuned for
     stab = None
     resonance = None
     if args.resonance:
@@ -281,8 +294,9 @@ def run(args: argparse.Namespace) -> int:
     out.update(at_range_end=at_end)
     if at_end > AT_END_SHARE:  # the error is then the stage's reach, not the law's
         print(f"hyst track: warning: the commands sat on the range's ends ({limits.v_min:g} or {limits.v_max:g} V) "
-              f"for {at_end:.0%} of the run: the reference asks for more than the stage reaches at this speed; "
-              "lower its amplitude (sine:F:A_um) or frequency", file=sys.stderr)
+              f"for {at_end:.0%} of the run, where the error is the range's, not the tracking's: the reference "
+              "leaves what the stage reaches within its range (at this speed, or a level beyond its stroke) or the "
+              "law drives its command to the limits (ringing, windup; see any oscillation warning)", file=sys.stderr)
     beyond = range_note(spec.fit, res.u) if spec is not None else None  # the model extrapolates there
     if beyond:
         out.update(range_warning=beyond)
@@ -300,6 +314,10 @@ def run(args: argparse.Namespace) -> int:
                units="m, V", params=args.params,
                scenario=args.scenario, compensated=comp.compensated(args.algorithm) if comp else [],
                not_compensated=comp.not_compensated(args.algorithm) if comp else {})
+    if stage == "embedded" and spec is not None and stored_range(spec.fit, "u") is None and args.stage == "auto":
+        print(f"hyst track: note: {args.params} records no identified input range (fit.u_min, fit.u_max): the "
+              "embedded PEA stage (0-150 V) was simulated; for another stage give --stage params --v-min V "
+              "--v-max V", file=sys.stderr)
     if comp is not None and comp.not_compensated(args.algorithm) and not args.json:
         print(f"note: {comp.describe(args.algorithm)}", file=sys.stderr)
     if args.json:
@@ -307,7 +325,9 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
     else:
         pos = f" (stage position {res.rmse_position * 1e6:.4f} um)" if res.x is not None else ""
-        print(f"{args.algorithm} tracking {args.reference} for {args.seconds:g} s at {args.rate:g} Hz: "
+        where = "the embedded PEA stage" if stage == "embedded" else \
+            f"the params file's stage ({limits.v_min:.4g}..{limits.v_max:.4g} V)"
+        print(f"{args.algorithm} tracking {args.reference} on {where} for {args.seconds:g} s at {args.rate:g} Hz: "
               f"RMSE {res.rmse * 1e6:.4f} um{pos}, MAE {res.mae * 1e6:.4f} um, "
               f"command {out['u_min']:.1f}..{out['u_max']:.1f} V")
     return 0

@@ -12,11 +12,12 @@ import pytest
 from hyst_model.cli.main import main
 
 
-def _stage(tmp_path, lo: float = -10.0, hi: float = 10.0, fit: bool = True) -> str:
-    """A params file of a ±10 V stage identified at 1 kHz over ``lo``..``hi`` V (``fit.u_min``/``u_max``)."""
+def _stage(tmp_path, lo: float = -10.0, hi: float = 10.0, fit: bool = True, shape: str = "gma") -> str:
+    """A params file of a ±10 V stage (``shape="pea"``: the embedded stage's model) identified at 1 kHz over
+    ``lo``..``hi`` V (``fit.u_min``/``u_max``)."""
     from hyst_model.core import stage_model
 
-    m = stage_model("gma").replace(u_scale=1.0)
+    m = stage_model("gma").replace(u_scale=1.0) if shape == "gma" else stage_model("pea")
     body = "".join(f"      {k}: {v!r}\n" for k, v in m.to_dict().items())
     prov = f"    fit:\n      u_min: {lo!r}\n      u_max: {hi!r}\n" if fit else ""
     p = tmp_path / "stage10.yaml"
@@ -88,6 +89,20 @@ def test_a_reference_beyond_the_stages_reach_is_said_to_be(capsys):
     """14 µm at 10 Hz about 15 µm asks the embedded stage for more than 0–150 V gives: the commands sit on the
     ends and the error is the stage's reach, not the law's; the default 10 µm stays inside."""
     out, err = _track(capsys, "--reference", "sine:10:14", "--seconds", "0.5")
-    assert out["at_range_end"] > 0.01 and "reaches at this speed" in err
+    assert out["at_range_end"] > 0.01 and "the error is the range" in err
     out, err = _track(capsys, "--reference", "sine:10", "--seconds", "0.5")
-    assert out["at_range_end"] == 0.0 and "reaches at this speed" not in err
+    assert out["at_range_end"] == 0.0 and "the error is the range" not in err
+
+
+def test_a_stage_inside_the_peas_range_but_not_the_pea_is_its_own_and_gains_add_to_the_scaled_ones(capsys, tmp_path):
+    """A 20-115 V record lies inside 0-150 V but is not the PEA: auto simulates its own stage; a --gain is applied
+    on top of the scaled PID defaults (it used to drop them, and the loop rang at the PEA's SI gains)."""
+    out, err = _track(capsys, "--params", _stage(tmp_path, 20.0, 115.0, shape="pea"), "--algorithm", "dppc",
+                      "--seconds", "0.3")
+    assert out["stage"] == "params" and out["v_min"] == 20.0 and 20.0 <= out["u_min"]
+    p = _stage(tmp_path)
+    plain, _ = _track(capsys, "--params", p, "--algorithm", "pid", "--seconds", "1")
+    tuned, _ = _track(capsys, "--params", p, "--algorithm", "pid", "--seconds", "1", "--gain", "t_filter=0.002")
+    assert "oscillation" not in tuned and tuned["rmse"] < 1.5 * plain["rmse"]
+    assert main(["track", "--params", p, "--seconds", "0.2"]) == 0
+    assert "on the params file's stage (-10..10 V)" in capsys.readouterr().out

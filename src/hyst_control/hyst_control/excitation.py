@@ -11,8 +11,10 @@ One excitation is a concatenation of parts, each starting and ending at the rest
 ``noise``      seeded Gaussian noise band-limited to ``f_lo`` … ``f_hi`` (FFT mask), faded in and out — what tells
                a stage mode from a delay and creep from drift (no tone to hide behind); not in the default parts
 
-The rest voltage is ``v_min`` for a unipolar amplifier (PEA, 0–150 V) and the centre of the range for a bipolar
-one (GMA, ±5 V). Every sample is inside ``[v_min, v_max]`` and within ``slew_max·dt`` of the previous one (the
+The rest voltage is 0 V where the range holds it — the PEA's 0–150 V, the GMA's ±5 V, another stage's −30…120 V —
+and otherwise the end nearer 0 V (20 V of a 20–120 V stage): the voltage the stage rests at, its ``v_safe``
+(:func:`hyst_common.profiles.custom_limits`), so the player starts where the stage is and leaves it there.
+Every sample is inside ``[v_min, v_max]`` and within ``slew_max·dt`` of the previous one (the
 final rate limiter guarantees it whatever the shapes ask for). Same arguments and seed → same samples.
 
 :func:`from_samples` checks an excitation read from a file (``hyst excite --out`` writes one) against the same
@@ -119,8 +121,12 @@ class ExcitationSpec:
 
     @property
     def rest(self) -> float:
-        """Voltage every part starts and ends at: ``v_min`` (unipolar) or the centre of the range (bipolar)."""
-        return 0.5 * (self.v_min + self.v_max) if self.v_min < 0.0 < self.v_max else self.v_min
+        """Voltage every part starts and ends at: 0 V where ``[v_min, v_max]`` holds it, else the end nearer 0 V.
+
+        For the two profiles the same as before (PEA 0 V = ``v_min``, GMA 0 V = the centre); a range centred
+        elsewhere rested at its centre, 45 V on −30…120 V, while the stage rested at 0 V: a 45 V jump at the start.
+        """
+        return min(max(0.0, self.v_min), self.v_max)
 
 
 @dataclass(frozen=True)

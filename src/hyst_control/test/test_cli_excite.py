@@ -73,3 +73,18 @@ def test_a_custom_range_for_another_stage_is_written_and_the_play_command_names_
     slew = np.max(np.abs(np.diff(u))) / (t[1] - t[0])
     assert slew <= 20.0 / 1e-3 * (1 + 1e-9)      # the default: a full swing in no less than 1 ms
     assert "-p profile:=custom -p v_min:=-10.0 -p v_max:=10.0" in cap.err   # what the node must be told
+
+
+@pytest.mark.parametrize("lo,hi,rest", [(-30.0, 120.0, 0.0), (-120.0, -20.0, -20.0), (20.0, 120.0, 20.0)])
+def test_a_custom_excitation_rests_where_the_stage_rests(tmp_path, capsys, lo, hi, rest):
+    """0 V where the range holds it, else the end nearer 0 V: the stage's v_safe (custom_limits), so the player
+    starts where the stage is (a −30…120 V range rested at its centre, 45 V, a 45 V jump at the start)."""
+    from hyst_common.profiles import custom_limits
+
+    out = tmp_path / "u.csv"
+    assert hyst(["excite", "--out", str(out), "--profile", "custom", "--v-min", str(lo), "--v-max", str(hi),
+                 "--parts", "steps,sines", "--json"]) == 0
+    desc = json.loads(capsys.readouterr().out)
+    _, u = read_input_csv(out)
+    assert desc["rest"] == rest == custom_limits(lo, hi).v_safe and u[0] == u[-1] == rest
+    assert lo <= u.min() and u.max() <= hi and u.max() - u.min() > 0.5 * (hi - lo)

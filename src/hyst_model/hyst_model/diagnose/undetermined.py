@@ -124,19 +124,20 @@ def sentence(items: list[Undetermined], noise: float, dt: float | None = None,
 
 def excite_command(dt: float | None, u_range: tuple[float, float] | None) -> str:
     """The ``hyst excite`` command for a record like this one: its rate and its input's reach (a stage is excited
-    where it was identified). Inside an amplifier profile's range (PEA 0–150 V, GMA ±5 V) it names that profile
-    and keeps the profile's rest voltage — 0 V, from which ``hyst_excite_node`` starts — so the node plays the file
-    with its defaults; a record beyond both (another stage, e.g. ±10 V) gets ``--profile custom`` with the
-    record's own range (never a profile's default range, which could drive that stage beyond what it was
-    driven). Without a range, the generic command."""
+    where it was identified). Inside an amplifier profile's range (PEA 0–150 V, GMA ±5 V) it names that profile —
+    with the record's lowest level as ``--v-min`` where a PEA record stays above 1.5 V (its rest is then there, not
+    at 0 V where the stage was never driven); a record beyond both (another stage, e.g. ±10 V) gets
+    ``--profile custom`` with the record's own range (never a profile's default range, which could drive that
+    stage beyond what it was driven). Without a range, the generic command."""
     cmd = "hyst excite --parts steps,noise,sweep"
     if dt is not None and np.isfinite(dt) and dt >= 1e-5:
         cmd += f" --rate {1.0 / dt:.6g}"
     if u_range is not None:
         lo, hi = (float(v) for v in u_range)
         reach = 0.9999 * max(abs(lo), abs(hi))  # inward by 0.01 %: a printed figure rounded up would leave it
-        if 0.0 <= lo < hi <= 150.0:
-            cmd += f" --profile pea --v-max {0.9999 * hi:.6g}"
+        if 0.0 <= lo < hi <= 150.0:  # from the record's lowest level: a 20-120 V stage is not driven to 0 V
+            low = f" --v-min {lo + 1e-4 * (hi - lo):.6g}" if lo > 0.01 * 150.0 else ""
+            cmd += f" --profile pea{low} --v-max {0.9999 * hi:.6g}"
         elif -5.0 <= lo < 0.0 < hi <= 5.0:
             cmd += f" --profile gma --v-min {-reach:.6g} --v-max {reach:.6g}"
         elif np.isfinite(lo) and np.isfinite(hi) and lo < hi:

@@ -49,6 +49,11 @@ def _stored(fit: Mapping, key: str) -> tuple[float, float] | None:
     return float(lo), float(hi)
 
 
+def _share(x: float) -> str:
+    """A share as a percentage that never reads 0 % for a share above zero."""
+    return f"{x:.0%}" if x >= 0.01 else f"{x:.2%}" if x >= 1e-4 else "under 0.01%"
+
+
 def stored_range(fit: Mapping, key: str = "u") -> tuple[float, float] | None:
     """``(min, max)`` of the input (``key="u"``, V) or measured output (``"y"``, m) a params file's provenance
     ``fit`` records, or None where it records none (an older file, a bad entry)."""
@@ -76,7 +81,7 @@ def range_note(fit: Mapping, u, tolerance: float = TOLERANCE) -> str | None:
     u, beyond = found
     share = float(np.mean(beyond))
     return (f"the input reaches {np.min(u):.4g} .. {np.max(u):.4g} V, outside the {lo:.4g} .. {hi:.4g} V the model "
-            f"was identified on ({share:.0%} of the samples): it extrapolates there and may be far off or diverge; "
+            f"was identified on ({_share(share)} of the samples): it extrapolates there and may be far off or diverge; "
             "identify it on a record that covers this range")
 
 
