@@ -40,17 +40,18 @@ def run_case(args: tuple) -> dict:
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None) -> str:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seed", type=int, default=60, help="family seed (cases use seed*100000 + i)")
     ap.add_argument("--n", type=int, default=24)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--factors", default="0.3,2,6", help="input scale factors, one drawn per case")
-    a = ap.parse_args(argv)
+    a = ap.parse_args(["--n", "8"] if argv is None else argv)  # run_all.py: a quick family
     factors = [float(x) for x in a.factors.split(",")]
     rng = np.random.default_rng(a.seed)
     jobs = [(a.seed * 100000 + i, KINDS[i % len(KINDS)], float(rng.choice(factors))) for i in range(a.n)]
     t0 = time.perf_counter()
+    lines: list[str] = []
     if a.jobs > 1:
         from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(a.jobs) as ex:
@@ -62,12 +63,12 @@ def main(argv: list[str] | None = None) -> int:
         s, x = r["as_is"], r["scaled"]
         agree = s["named"] == x["named"]
         same += agree
-        print(f"{r['case']:45s} ×{r['factor']:<4g} expected {','.join(r['expected']):22s} as is "
+        lines.append(f"{r['case']:45s} ×{r['factor']:<4g} expected {','.join(r['expected']):22s} as is "
               f"{','.join(s['named']):24s} ({s['base']:.3g}→{s['final']:.3g}×)  scaled {','.join(x['named']):24s} "
               f"({x['base']:.3g}→{x['final']:.3g}×){'' if agree else '  DIFFERS'}")
-    print(f"\nsame answer on {same} / {len(rows)} cases; {time.perf_counter() - t0:.0f} s")
-    return 0
+    lines.append(f"\nsame answer on {same} / {len(rows)} cases; {time.perf_counter() - t0:.0f} s")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    print(main(sys.argv[1:]))

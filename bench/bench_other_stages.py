@@ -22,6 +22,8 @@ Usage: ``python bench/bench_other_stages.py [--n 12] [--seed 7000] [--seconds 1]
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import math
 import sys
 import tempfile
@@ -99,7 +101,9 @@ def run_case(seed: int, seconds: float, work: Path) -> dict:
     y = np.array([rec.step(float(v)) for v in u])
     csv, par = work / f"r{seed}.csv", work / f"p{seed}.yaml"
     write_csv(csv, {"t": t, "u": u, "y": y}, force=True)
-    if hyst(["fit", str(csv), "--out", str(par), "--quiet", "--force"]) != 0:
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):  # its table
+        rc = hyst(["fit", str(csv), "--out", str(par), "--quiet", "--force"])
+    if rc != 0:
         return {"seed": seed, "error": "fit failed"}
     spec = read_params(par)
     model, comp = from_params(spec, 1.0 / rate)
@@ -128,40 +132,41 @@ def run_case(seed: int, seconds: float, work: Path) -> dict:
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None) -> str:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=12)
     ap.add_argument("--seed", type=int, default=7000)
     ap.add_argument("--seconds", type=float, default=1.0)
-    a = ap.parse_args(argv)
+    a = ap.parse_args(["--n", "4", "--seconds", "0.5"] if argv is None else argv)  # run_all.py: a quick family
     t0 = time.perf_counter()
+    lines: list[str] = []
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(a.n):
             rows.append(run_case(a.seed + i, a.seconds, Path(tmp)))
             r = rows[-1]
             if "error" in r:
-                print(f"{r['seed']}: {r['error']}")
+                lines.append(f"{r['seed']}: {r['error']}")
                 continue
             cells = "  ".join(f"{alg} " + "/".join(f"{e:.3g}{f}" for e, f in r[alg]) for alg in ALGS)
-            print(f"{r['seed']}  {r['range'][0]:+.4g}..{r['range'][1]:.4g} V  {r['stroke'] * 1e6:5.1f} um  "
-                  f"{r['rate']:.0f} Hz  fit {r['fit']:.2f}x   {cells}", flush=True)
+            lines.append(f"{r['seed']}  {r['range'][0]:+.4g}..{r['range'][1]:.4g} V  {r['stroke'] * 1e6:5.1f} um  "
+                  f"{r['rate']:.0f} Hz  fit {r['fit']:.2f}x   {cells}")
     ok = [r for r in rows if "error" not in r]
     for label, sub in (("all", ok),):
-        print(f"\nRMSE over the 2 nm noise over {len(sub)} stages ({label}): median, worst, laws flagged:")
+        lines.append(f"\nRMSE over the 2 nm noise over {len(sub)} stages ({label}): median, worst, laws flagged:")
         for alg in ALGS:
             for k, ref in enumerate(REFS):
                 reach = [r for r in sub if not any("sat" in r[a][k][1] for a in ALGS if a != "pid_si")]
                 v = np.array([r[alg][k][0] for r in sub])
                 w = np.array([r[alg][k][0] for r in reach])
                 flagged = sum(1 for r in sub if r[alg][k][1])
-                print(f"  {alg:9s} {ref:8s} median {np.nanmedian(v):8.3g}  worst {np.nanmax(v):8.3g}  "
+                lines.append(f"  {alg:9s} {ref:8s} median {np.nanmedian(v):8.3g}  worst {np.nanmax(v):8.3g}  "
                       f"flagged {flagged}/{len(sub)}  diverged {int(np.sum(~np.isfinite(v)))}   reachable "
                       f"({w.size}): median {np.nanmedian(w) if w.size else math.nan:8.3g}  worst "
                       f"{np.nanmax(w) if w.size else math.nan:8.3g}")
-    print(f"{time.perf_counter() - t0:.0f} s")
-    return 0
+    lines.append(f"{time.perf_counter() - t0:.0f} s")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    print(main(sys.argv[1:]))
