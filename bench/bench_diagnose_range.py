@@ -64,8 +64,8 @@ def main(argv: list[str] | None = None) -> str:
         agree = s["named"] == x["named"]
         same += agree
         lines.append(f"{r['case']:45s} ×{r['factor']:<4g} expected {','.join(r['expected']):22s} as is "
-              f"{','.join(s['named']):24s} ({s['base']:.3g}→{s['final']:.3g}×)  scaled {','.join(x['named']):24s} "
-              f"({x['base']:.3g}→{x['final']:.3g}×){'' if agree else '  DIFFERS'}")
+                     f"{','.join(s['named']):24s} ({s['base']:.3g}→{s['final']:.3g}×)  scaled "
+                     f"{','.join(x['named']):24s} ({x['base']:.3g}→{x['final']:.3g}×){'' if agree else '  DIFFERS'}")
     lines.append(f"\nsame answer on {same} / {len(rows)} cases; {time.perf_counter() - t0:.0f} s")
     return "\n".join(lines)
 

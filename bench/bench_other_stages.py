@@ -150,20 +150,20 @@ def main(argv: list[str] | None = None) -> str:
                 continue
             cells = "  ".join(f"{alg} " + "/".join(f"{e:.3g}{f}" for e, f in r[alg]) for alg in ALGS)
             lines.append(f"{r['seed']}  {r['range'][0]:+.4g}..{r['range'][1]:.4g} V  {r['stroke'] * 1e6:5.1f} um  "
-                  f"{r['rate']:.0f} Hz  fit {r['fit']:.2f}x   {cells}")
+                         f"{r['rate']:.0f} Hz  fit {r['fit']:.2f}x   {cells}")
     ok = [r for r in rows if "error" not in r]
-    for label, sub in (("all", ok),):
-        lines.append(f"\nRMSE over the 2 nm noise over {len(sub)} stages ({label}): median, worst, laws flagged:")
-        for alg in ALGS:
-            for k, ref in enumerate(REFS):
-                reach = [r for r in sub if not any("sat" in r[a][k][1] for a in ALGS if a != "pid_si")]
-                v = np.array([r[alg][k][0] for r in sub])
-                w = np.array([r[alg][k][0] for r in reach])
-                flagged = sum(1 for r in sub if r[alg][k][1])
-                lines.append(f"  {alg:9s} {ref:8s} median {np.nanmedian(v):8.3g}  worst {np.nanmax(v):8.3g}  "
-                      f"flagged {flagged}/{len(sub)}  diverged {int(np.sum(~np.isfinite(v)))}   reachable "
-                      f"({w.size}): median {np.nanmedian(w) if w.size else math.nan:8.3g}  worst "
-                      f"{np.nanmax(w) if w.size else math.nan:8.3g}")
+    label, sub = "all", ok
+    lines.append(f"\nRMSE over the 2 nm noise over {len(sub)} stages ({label}): median, worst, laws flagged:")
+    for alg in ALGS:
+        for k, ref in enumerate(REFS):
+            reach = [r for r in sub if not any("sat" in r[a][k][1] for a in ALGS if a != "pid_si")]
+            v = np.array([r[alg][k][0] for r in sub])
+            w = np.array([r[alg][k][0] for r in reach])
+            flagged = sum(1 for r in sub if r[alg][k][1])
+            lines.append(f"  {alg:9s} {ref:8s} median {np.nanmedian(v):8.3g}  worst {np.nanmax(v):8.3g}  "
+                         f"flagged {flagged}/{len(sub)}  diverged {int(np.sum(~np.isfinite(v)))}   reachable "
+                         f"({w.size}): median {np.nanmedian(w) if w.size else math.nan:8.3g}  worst "
+                         f"{np.nanmax(w) if w.size else math.nan:8.3g}")
     lines.append(f"{time.perf_counter() - t0:.0f} s")
     return "\n".join(lines)
 
