@@ -121,9 +121,7 @@ def run_case(seed: int, seconds: float, work: Path) -> dict:
                 r = run_closed_loop(ctrl, parse_reference(ref, stroke=stroke), seconds,
                                     plant=_plant(p, lim, rate, prof, seed + 1))
                 e = r.rmse / noise
-                tol = 1e-6 * (lim.v_max - lim.v_min)
-                at_end = float(np.mean((r.u <= lim.v_min + tol) | (r.u >= lim.v_max - tol)))
-                flag = ("osc" if ctrl.events else "") + ("sat" if at_end > 0.01 else "") + \
+                flag = ("osc" if ctrl.events else "") + ("sat" if r.at_limits(lim.v_min, lim.v_max) > 0.01 else "") + \
                     ("out" if r.u.min() < lim.v_min - 1e-9 or r.u.max() > lim.v_max + 1e-9 else "")
             except Exception as err:  # noqa: BLE001 - a diverged loop is a result, not a crash of the bench
                 e, flag = math.nan, type(err).__name__

@@ -30,14 +30,12 @@ import sys
 
 from pathlib import Path
 
-import numpy as np
-
 from hyst_control.compensation import Compensation, from_params
 from hyst_control.controller_settings import model_divergence
 from hyst_control.controllers import ALGORITHMS, CONTROLLERS, make_controller, make_supervised, mismatched
 from hyst_common.errors import ConfigError as CommonConfigError
 from hyst_common.limits import CommandLimits
-from hyst_common.profiles import PEA_LIMITS, custom_limits
+from hyst_common.profiles import PEA_LIMITS, custom_base, custom_limits
 from hyst_control.errors import ConfigError
 from hyst_control.pid import gains_for
 from hyst_control.reference import parse_reference
@@ -159,9 +157,7 @@ def _which_stage(args: argparse.Namespace, spec) -> str:
         return "embedded"
     if spec is None:
         raise ConfigError("--stage params needs --params (the stage's model)")
-    if args.stage == "params":
-        return "params"
-    if args.v_min is not None or args.v_max is not None:
+    if args.stage == "params" or args.v_min is not None or args.v_max is not None:
         return "params"
     rng = stored_range(spec.fit, "u")
     if rng is None:  # nothing says it is another stage (said after the run, since it may be)
@@ -194,12 +190,11 @@ def _stage_limits(args: argparse.Namespace, spec, path: str) -> CommandLimits:
 def _params_stage(path: str, rate: float, seed: int, lim: CommandLimits) -> PlantConfig:
     """The params file's own stage (its base MBW as the truth, the sensor of the rig's stages) over ``lim``."""
     try:
-        base = PlantConfig.from_params_file(path, "gma" if lim.v_min < 0.0 < lim.v_max else "pea", rate,
-                                            seed=seed, v_min=lim.v_min, v_max=lim.v_max, slew_max=lim.slew_max,
+        return PlantConfig.from_params_file(path, custom_base(lim.v_min, lim.v_max), rate, seed=seed,
+                                            v_min=lim.v_min, v_max=lim.v_max, slew_max=lim.slew_max,
                                             v_init=lim.v_safe)
     except (SimError, ValueError) as err:
         raise ConfigError(f"--stage params: {err}") from err
-    return base
 
 
 def _plant(scenario: str, rate: float, seed: int, base: PlantConfig | None = None):
@@ -289,8 +284,7 @@ def run(args: argparse.Namespace) -> int:
                            compensation=comp, act=args.stability != "warn")
     res = run_closed_loop(ctrl, ref, args.seconds, plant=plant)
     out = res.summary()
-    tol = 1e-6 * (limits.v_max - limits.v_min)
-    at_end = float(np.mean((res.u <= limits.v_min + tol) | (res.u >= limits.v_max - tol)))
+    at_end = res.at_limits(limits.v_min, limits.v_max)
     out.update(at_range_end=at_end)
     if at_end > AT_END_SHARE:  # the error is then the stage's reach, not the law's
         print(f"hyst track: warning: the commands sat on the range's ends ({limits.v_min:g} or {limits.v_max:g} V) "

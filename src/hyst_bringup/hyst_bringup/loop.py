@@ -102,6 +102,12 @@ class LoopResult:
         """Maximum absolute error (thesis ch. 4.3.2 'MAE'), m."""
         return float(np.max(np.abs(self.error)))
 
+    def at_limits(self, v_min: float, v_max: float) -> float:
+        """Share of the run's commands on ``v_min`` or ``v_max`` (to 1e-6 of the range): where the error is the
+        range's, not the tracking's."""
+        tol = 1e-6 * (v_max - v_min)
+        return float(np.mean((self.u <= v_min + tol) | (self.u >= v_max - tol)))
+
     @property
     def finite(self) -> bool:
         return bool(np.all(np.isfinite(self.y)) and np.all(np.isfinite(self.u)))

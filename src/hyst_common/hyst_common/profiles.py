@@ -25,7 +25,7 @@ from .errors import ConfigError
 from .limits import CommandLimits
 
 __all__ = ["Profile", "PEA", "GMA", "PROFILES", "get_profile", "V_SPAN", "PEA_LIMITS", "GMA_LIMITS",
-           "CUSTOM_V_MAX", "CUSTOM_SWING_TIME", "custom_limits"]
+           "CUSTOM_V_MAX", "CUSTOM_SWING_TIME", "custom_limits", "rest_voltage", "custom_slew", "custom_base"]
 
 
 @dataclass(frozen=True)
@@ -118,6 +118,25 @@ CUSTOM_V_MAX = 1000.0
 CUSTOM_SWING_TIME = 1e-3
 
 
+def rest_voltage(v_min: float, v_max: float) -> float:
+    """The voltage a stage rests at (V): 0 V (zero field) where ``[v_min, v_max]`` holds it, else the end nearer
+    0 V — the PEA's and the GMA's 0 V, 20 V of a 20–120 V stage. The excitation starts and ends there too."""
+    return min(max(0.0, v_min), v_max)
+
+
+def custom_slew(v_min: float, v_max: float) -> float:
+    """Default slew limit (V/s) of another stage's amplifier: a full swing in :data:`CUSTOM_SWING_TIME`
+    (1e4 V/s, the GMA's, while no range is given yet: a node declares it before it is checked)."""
+    span = v_max - v_min
+    return span / CUSTOM_SWING_TIME if span > 0 else 1e4
+
+
+def custom_base(v_min: float, v_max: float) -> str:
+    """The profile whose sensor and model defaults another stage's simulation takes: ``gma`` for a range about
+    0 V, else ``pea`` (both have the rig's 2 nm sensor; the stage's range and model are its own)."""
+    return "gma" if v_min < 0.0 < v_max else "pea"
+
+
 def custom_limits(v_min: float, v_max: float, slew_max: float | None = None) -> CommandLimits:
     """Command limits of a stage outside the two profiles, from its amplifier range (V) as the user gives it.
 
@@ -133,5 +152,5 @@ def custom_limits(v_min: float, v_max: float, slew_max: float | None = None) -> 
     if not (math.isfinite(lo) and math.isfinite(hi) and -CUSTOM_V_MAX <= lo < hi <= CUSTOM_V_MAX):
         raise ConfigError(f"a custom amplifier range needs finite v_min < v_max within ±{CUSTOM_V_MAX:g} V, "
                           f"got {lo:g}..{hi:g} V")
-    slew = (hi - lo) / CUSTOM_SWING_TIME if slew_max is None else float(slew_max)
-    return CommandLimits(v_min=lo, v_max=hi, slew_max=slew, v_safe=min(max(0.0, lo), hi))
+    slew = custom_slew(lo, hi) if slew_max is None else float(slew_max)
+    return CommandLimits(v_min=lo, v_max=hi, slew_max=slew, v_safe=rest_voltage(lo, hi))

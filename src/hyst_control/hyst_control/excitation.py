@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyst_common.profiles import rest_voltage
+
 from .errors import ConfigError
 
 __all__ = ["PARTS", "DEFAULT_PARTS", "DEFAULT_RATE", "MIN_RATE", "MAX_RATE", "ExcitationSpec", "Excitation",
@@ -126,7 +128,7 @@ class ExcitationSpec:
         For the two profiles the same as before (PEA 0 V = ``v_min``, GMA 0 V = the centre); a range centred
         elsewhere rested at its centre, 45 V on −30…120 V, while the stage rested at 0 V: a 45 V jump at the start.
         """
-        return min(max(0.0, self.v_min), self.v_max)
+        return rest_voltage(self.v_min, self.v_max)
 
 
 @dataclass(frozen=True)

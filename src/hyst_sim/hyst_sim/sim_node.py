@@ -55,8 +55,8 @@ from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .errors import SimError
 from .plant import Plant
-from hyst_common.profiles import CUSTOM_V_MAX, PEA, V_SPAN, get_profile
-from .sim_settings import custom_slew, SimSettings, plant_config
+from hyst_common.profiles import CUSTOM_V_MAX, PEA, V_SPAN, custom_slew, get_profile, rest_voltage
+from .sim_settings import SimSettings, plant_config
 from .truth_effects import EFFECT_NAMES, Effects
 
 __all__ = ["SimNode", "SimSettings", "plant_config", "main"]
@@ -148,7 +148,7 @@ class SimNode(AtomicParametersNode):
         d("command_timeout", 0.2, ParameterDescriptor(
             description="no command for this long (s) -> ramp to v_safe (realtime mode)",
             floating_point_range=fp_range(1e-3, 3600.0)))
-        d("v_safe", min(max(0.0, lo), hi) if custom else prof.v_safe, ParameterDescriptor(
+        d("v_safe", rest_voltage(lo, hi) if custom else prof.v_safe, ParameterDescriptor(
             description="voltage at start and after a timeout (V)", floating_point_range=fp_range(*box)))
         d("safe_ramp_rate", 100.0, ParameterDescriptor(description="ramp rate towards v_safe after a timeout (V/s)",
                                                        floating_point_range=fp_range(1e-3, 1e8)))

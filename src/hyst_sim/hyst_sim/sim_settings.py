@@ -7,17 +7,10 @@ from typing import Any
 from .errors import SimError
 from .plant import PlantConfig
 from hyst_common.errors import ConfigError
-from hyst_common.profiles import CUSTOM_SWING_TIME, custom_limits, get_profile
+from hyst_common.profiles import custom_base, custom_limits, get_profile
 from .scenario import load_scenario
 
-__all__ = ["SimSettings", "plant_config", "custom_slew"]
-
-
-def custom_slew(v_min: float, v_max: float) -> float:
-    """Default slew limit (V/s) of a ``custom`` stage: a full swing in ``CUSTOM_SWING_TIME`` (1e4 V/s before a
-    range is given)."""
-    span = v_max - v_min
-    return span / CUSTOM_SWING_TIME if span > 0 else 1e4
+__all__ = ["SimSettings", "plant_config"]
 
 
 @dataclass(frozen=True)
@@ -69,7 +62,7 @@ def plant_config(s: SimSettings) -> PlantConfig:
     common: dict[str, Any] = dict(sensor=False, seed=s.seed, v_min=s.v_min, v_max=s.v_max, slew_max=s.slew_max,
                                   v_init=s.v_safe)
     if s.params_file:  # a custom stage takes the rig's sensor defaults; its range is in ``common``
-        base = ("gma" if s.v_min < 0.0 < s.v_max else "pea") if s.profile == "custom" else s.profile
+        base = custom_base(s.v_min, s.v_max) if s.profile == "custom" else s.profile
         cfg = PlantConfig.from_params_file(s.params_file, base, s.rate, **common)
     else:
         cfg = PlantConfig.for_profile(s.profile, s.rate, **common)
