@@ -18,3 +18,12 @@ def test_help_and_bad_profile():
     assert out.returncode == 0 and "--profile" in out.stdout
     bad = subprocess.run(run + ["--faults", "nonsense=1"], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and bad.stderr.startswith("hyst_emulator:")
+
+
+def test_a_custom_stage_needs_its_model_and_range_on_the_command_line(tmp_path):
+    run = [sys.executable, "-c", "import sys; from hyst_bringup.emulator import main; sys.exit(main())"]
+    for args, why in ((["--profile", "custom", "--v-min", "-10", "--v-max", "10"], "needs --params-file"),
+                      (["--profile", "custom", "--params-file", str(tmp_path / "p.yaml")], "needs --v-min"),
+                      (["--v-min", "0", "--v-max", "100"], "custom stage")):
+        r = subprocess.run(run + args, capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and why in r.stderr and "Traceback" not in r.stderr, (args, r.stderr)

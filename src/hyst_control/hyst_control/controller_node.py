@@ -33,7 +33,8 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
-from hyst_common.profiles import GMA_LIMITS, PEA_LIMITS
+from hyst_common.errors import ConfigError
+from hyst_common.profiles import CUSTOM_V_MAX, custom_base, custom_limits, get_profile
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from hyst_model.core import MBWParams
@@ -104,15 +105,31 @@ class ControllerNode(AtomicParametersNode):
     # Parameters -----------------------------------------------------------------------------------------
     def _declare(self) -> None:
         d = self.declare_parameter
-        d("profile", "pea", ParameterDescriptor(description="limit defaults: pea (0-150 V) | gma (+-5 V)",
-                                                read_only=True))
-        lim = GMA_LIMITS if self.get_parameter("profile").value == "gma" else PEA_LIMITS
+        d("profile", "pea", ParameterDescriptor(
+            description="limit defaults: pea (0-150 V) | gma (+-5 V) | custom (another stage: needs v_min, v_max "
+                        "and its model, --params-file P from hyst fit --out)", read_only=True,
+            additional_constraints="one of: pea, gma, custom"))
+        name = str(self.get_parameter("profile").value).strip().lower()
+        custom = name == "custom"
+        lim = None if custom else get_profile(name).limits()  # ConfigError (exit 2) for an unknown name
+        box = fp_range(-CUSTOM_V_MAX, CUSTOM_V_MAX) if custom else fp_range(-200, 200)
         d("algorithm", "dppc", ParameterDescriptor(description=" | ".join(ALGORITHMS) + " (bumpless switch)"))
         d("rate", 1000.0, ParameterDescriptor(description="expected state rate (Hz)",
                                               floating_point_range=fp_range(1, 5000)))
-        for n, v, txt in (("v_min", lim.v_min, "lowest command (V)"), ("v_max", lim.v_max, "highest command (V)"),
-                          ("v_safe", lim.v_safe, "command held by the watchdog (V)")):
-            d(n, v, ParameterDescriptor(description=txt, floating_point_range=fp_range(-200, 200)))
+        for n, v, txt in (("v_min", lim.v_min if lim else 0.0, "lowest command (V)"),
+                          ("v_max", lim.v_max if lim else 0.0, "highest command (V)")):
+            d(n, v, ParameterDescriptor(description=txt, floating_point_range=box))
+        if lim is None:  # another stage: no default range, the user names the amplifier's
+            try:
+                lim = custom_limits(self.get_parameter("v_min").value, self.get_parameter("v_max").value)
+            except ConfigError as err:
+                raise ControlError(f"profile custom needs v_min and v_max, the stage amplifier's range: {err}") \
+                    from err
+            if not any(k.startswith("model.") for k in self._parameter_overrides):
+                raise ControlError("profile custom needs the stage's model: --params-file P (hyst fit --out); the "
+                                   "embedded models are the PEA's and the GMA's")
+        d("v_safe", lim.v_safe, ParameterDescriptor(description="command held by the watchdog (V)",
+                                                    floating_point_range=box))
         d("slew_max", lim.slew_max, ParameterDescriptor(description="command slew limit (V/s)",
                                                         floating_point_range=fp_range(1e-3, 1e9)))
         d("watchdog_periods", 100, ParameterDescriptor(
@@ -136,7 +153,7 @@ class ControllerNode(AtomicParametersNode):
         d("stability.gain_margin", 2.0, ParameterDescriptor(
             description="gain margin (factor, both ways) the loop with the resonance must keep",
             floating_point_range=fp_range(1.0, 10.0)))
-        m = profile_model(self.get_parameter("profile").value)
+        m = profile_model(custom_base(lim.v_min, lim.v_max) if custom else name)  # custom: the file's replace it
         d("model.base", "mbw", ParameterDescriptor(description="base model of the params file (controllers need mbw)"))
         d("model.effects", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
             description="effects of the params file (innermost first): those with an inverse are compensated "

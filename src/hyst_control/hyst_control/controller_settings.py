@@ -3,6 +3,7 @@ is declared, validated and applied from, the frozen :class:`ControllerSettings` 
 change and built, with every check, by :func:`read_settings`, and the profile's default stage model."""
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -104,6 +105,20 @@ def model_divergence(algorithm: str, model: MBWParams, comp: Compensation | None
             "the predictors would refuse it; refit on a record with steps across the range")
 
 
+def _reference(spec: str, profile: str, model: MBWParams, limits: CommandLimits) -> Reference | None:
+    """The internal reference of a spec: on the PEA's stroke as documented, on the model's own stroke (its rest
+    displacement at ``v_min`` and ``v_max``) for any other profile — the GMA's ±20 µm holds no 5–25 µm sine."""
+    if not spec:
+        return None
+    if profile.strip().lower() == "pea":
+        return parse_reference(spec)
+    lo, hi = model.rest_output(limits.v_min), model.rest_output(limits.v_max)
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+        raise ControlError(f"reference {spec!r}: the model has no finite, increasing rest displacement over "
+                           f"v_min..v_max ({limits.v_min:g}..{limits.v_max:g} V) to place it on; check the model")
+    return parse_reference(spec, stroke=(lo, hi))
+
+
 def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> ControllerSettings:
     """The settings the node's parameters give, every check made; ``get(name)`` is a parameter's value.
 
@@ -146,7 +161,7 @@ def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> Co
         algorithm=alg, rate=rate, limits=limits,
         watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
         dmrac_initial=init, model=model,
-        reference=parse_reference(str(get("reference"))) if str(get("reference")) else None, stability=stab,
+        reference=_reference(str(get("reference")), str(get("profile")), model, limits), stability=stab,
         effects=effects, effect_values=evals, gain_sets=tuple(gains.items()), divergence=divergence)
     make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init, s.compensation())  # checks all
     return s

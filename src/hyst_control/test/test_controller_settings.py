@@ -10,7 +10,8 @@ from hyst_control.errors import ControlError
 
 def _params(**over):
     m = profile_model("pea")
-    d = {"algorithm": "dppc", "model.base": "mbw", "model.dt": 0.0, "rate": 1000.0, "dmrac.initial": "model",
+    d = {"profile": "pea", "algorithm": "dppc", "model.base": "mbw", "model.dt": 0.0, "rate": 1000.0,
+         "dmrac.initial": "model",
          "model.effects": (), "stability.policy": "derate", "stability.notch": True, "stability.gain_margin": 2.0,
          "v_min": PEA_LIMITS.v_min, "v_max": PEA_LIMITS.v_max, "slew_max": PEA_LIMITS.slew_max,
          "v_safe": PEA_LIMITS.v_safe, "watchdog_periods": 100, "state_decimation": 10, "reference": ""}
@@ -38,3 +39,24 @@ def test_the_defaults_give_the_profile_model_and_the_configured_gains():
 def test_a_parameter_set_the_laws_cannot_run_is_refused_with_its_reason(over, why):
     with pytest.raises(ControlError, match=why.replace(".", r"\.")):
         read_settings(_params(**over), ())
+
+
+def test_an_internal_reference_sits_on_the_stroke_of_the_profile_model():
+    """sine:5 is 5–25 µm on the PEA (as documented); on the GMA (±20 µm) it was placed there too and half of it was
+    out of reach: another profile's reference now sits on its model's rest stroke as the sine sits on the PEA's."""
+    from hyst_common.profiles import GMA_LIMITS
+    from hyst_control.reference import parse_reference
+
+    pea = read_settings(_params(reference="sine:5"), ()).reference
+    assert pea == parse_reference("sine:5")
+    m = profile_model("gma")
+    lo, hi = m.rest_output(GMA_LIMITS.v_min), m.rest_output(GMA_LIMITS.v_max)
+    gma = dict(profile="gma", v_min=GMA_LIMITS.v_min, v_max=GMA_LIMITS.v_max, slew_max=GMA_LIMITS.slew_max,
+               v_safe=GMA_LIMITS.v_safe, reference="sine:5",
+               **{f"model__{k}": float(getattr(m, k)) for k in MODEL_KEYS})
+    ref = read_settings(_params(**gma), ()).reference
+    assert lo < -15e-6 and hi > 15e-6  # the GMA's ±20 µm
+    assert lo < ref.offset - ref.amplitude and ref.offset + ref.amplitude < hi
+    assert ref.offset == pytest.approx(lo + (hi - lo) * 0.5) and ref.amplitude == pytest.approx((hi - lo) / 3)
+    # numbers given in the spec stay the absolute µm they say
+    assert read_settings(_params(**{**gma, "reference": "sine:5:4"}), ()).reference.amplitude == pytest.approx(4e-6)

@@ -23,8 +23,9 @@ from rclpy.parameter import Parameter
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
+from hyst_common.errors import ConfigError as HystConfigError
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
-from hyst_common.profiles import GMA, PEA, get_profile
+from hyst_common.profiles import CUSTOM_V_MAX, GMA, PEA, Profile, custom_limits, custom_slew, get_profile, rest_voltage
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .adapter import PROTOCOLS, make_adapter
@@ -57,15 +58,21 @@ class DriverConfig:
 
     def validate(self) -> "DriverConfig":
         """Cross-parameter checks; raises :class:`ConfigError` with a reason."""
-        prof = get_profile(self.profile)
         if not self.port:
             raise ConfigError("parameter 'port' is empty: give the device path, e.g. -p port:=/dev/ttyACM0 "
                               "(without hardware: run hyst_emulator and use the path it prints)")
         if self.protocol not in PROTOCOLS:
             raise ConfigError(f"protocol {self.protocol!r} unknown; choose one of {', '.join(PROTOCOLS)}")
-        if not prof.v_min <= self.v_min < self.v_max <= prof.v_max:
-            raise ConfigError(f"need {prof.v_min} <= v_min < v_max <= {prof.v_max} V for profile {prof.name}, "
-                              f"got v_min={self.v_min}, v_max={self.v_max}")
+        if self.profile.strip().lower() == "custom":  # another amplifier: its range is the user's
+            try:
+                custom_limits(self.v_min, self.v_max, self.slew_max)
+            except HystConfigError as err:  # hyst_common's: the driver's own is raised
+                raise ConfigError(f"profile custom needs v_min and v_max, the amplifier's range: {err}") from err
+        else:
+            prof = get_profile(self.profile)
+            if not prof.v_min <= self.v_min < self.v_max <= prof.v_max:
+                raise ConfigError(f"need {prof.v_min} <= v_min < v_max <= {prof.v_max} V for profile {prof.name}, "
+                                  f"got v_min={self.v_min}, v_max={self.v_max}")
         lim = self.limits()
         if lim.slew_max * lim.dt_max < 1e-6:
             raise ConfigError(f"slew_max {self.slew_max} V/s moves less than 1 uV per sample at {self.rate} Hz")
@@ -78,21 +85,31 @@ class DriverConfig:
                       safe_ramp_rate=self.safe_ramp_rate)
 
 
-def param_table(prof) -> list[tuple[str, object, tuple | None, str]]:
+def param_table(prof: Profile | None, v_range: tuple[float, float] = (0.0, 0.0)
+                ) -> list[tuple[str, object, tuple | None, str]]:
     """``(name, default, range, description)`` of every parameter but ``profile``: the one table behind the
-    declarations and ``--help``. Limits default to, and are ranged by, the profile (:mod:`hyst_common.profiles`)."""
-    lo, hi = prof.v_min, prof.v_max
+    declarations and ``--help``. Limits default to, and are ranged by, the profile (:mod:`hyst_common.profiles`);
+    ``prof`` None is ``profile custom``: the limits are ranged by ±:data:`CUSTOM_V_MAX` and have no default range
+    (``v_range``, the user's ``v_min``/``v_max`` when given, sets the slew and rest defaults), the sensor is the
+    rig's (PEA's)."""
+    if prof is None:
+        lo, hi = -CUSTOM_V_MAX, CUSTOM_V_MAX
+        dlo, dhi = v_range
+        slew, safe, res = custom_slew(dlo, dhi), rest_voltage(dlo, dhi), PEA.sensor_resolution
+    else:
+        lo, hi = dlo, dhi = prof.v_min, prof.v_max
+        slew, safe, res = prof.slew_max, prof.v_safe, prof.sensor_resolution
     return [
         ("port", "", None, "serial device or pty path (a stable /dev/serial/by-id/... link survives replugs)"),
         ("baud", 921600, (1200, 4000000), "UART baud rate (ignored by USB-CDC and ptys)"),
         ("protocol", "ascii", None, "device protocol: ascii (HDB/1, streamed, CRC-8) | gcs (GCS-like, polled)"),
         ("rate", 1000.0, (1.0, 2000.0), "sample rate, Hz (HDB/1 streams at the nearest integer)"),
-        ("counts_to_m", prof.sensor_resolution, (1e-12, 1e-3), "metres per sensor count (ascii; gcs reports um)"),
-        ("v_min", lo, (lo, hi), "lowest voltage ever sent, V"),
-        ("v_max", hi, (lo, hi), "highest voltage ever sent, V"),
-        ("slew_max", prof.slew_max, (1e-3, 1e9), "largest voltage rate ever sent, V/s"),
+        ("counts_to_m", res, (1e-12, 1e-3), "metres per sensor count (ascii; gcs reports um)"),
+        ("v_min", dlo, (lo, hi), "lowest voltage ever sent, V"),
+        ("v_max", dhi, (lo, hi), "highest voltage ever sent, V"),
+        ("slew_max", slew, (1e-3, 1e9), "largest voltage rate ever sent, V/s"),
         ("command_timeout", 0.2, (1e-3, 3600.0), "no command for this long (s): ramp to v_safe"),
-        ("v_safe", prof.v_safe, (lo, hi), "voltage ramped to when commands stop and on shutdown, V"),
+        ("v_safe", safe, (lo, hi), "voltage ramped to when commands stop and on shutdown, V"),
         ("safe_ramp_rate", 100.0, (1e-3, 1e9), "rate of the ramps to v_safe, V/s (never above slew_max)"),
         ("link_timeout", 0.5, (0.005, 60.0), "no sample for this long (s): close the port and reconnect"),
         ("frame_id", "stage", None, "header.frame_id of /stage/state"),
@@ -106,7 +123,9 @@ def usage() -> str:
 
     lines = ["usage: hyst_driver_node --ros-args -p port:=PATH [-p NAME:=VALUE ...]", "",
              __doc__.strip(), "", "parameters (defaults for profile pea; gma: v_min -5, v_max 5, v_safe 0, "
-             f"slew_max {GMA.slew_max:g}):", "  profile          pea | gma (read-only)"]
+             f"slew_max {GMA.slew_max:g}; custom: v_min and v_max required, within +-{CUSTOM_V_MAX:g} V, slew_max a "
+             "full swing in 1 ms, v_safe 0 V or the range end nearer it):",
+             "  profile          pea | gma | custom (read-only)"]
     for name, default, rng, text in param_table(PEA):
         r = f" [{rng[0]:g} .. {rng[1]:g}]" if rng else ""
         lines.append(f"  {name:<16} {default!r}{r}  {text}")
@@ -124,11 +143,13 @@ class DriverNode(AtomicParametersNode):
     def __init__(self, **kwargs) -> None:
         super().__init__("hyst_driver", **kwargs)
         self.declare_parameter("profile", "pea", ParameterDescriptor(
-            description="actuator profile: pea (0..150 V) | gma (+-5 V); sets the limits' defaults and ranges",
-            read_only=True))
-        prof = get_profile(self.get_parameter("profile").value)  # ConfigError for a bad name → main()
-        lo, hi = prof.v_min, prof.v_max
-        for name, default, rng, text in param_table(prof):
+            description="actuator profile: pea (0..150 V) | gma (+-5 V) | custom (another amplifier: set v_min and "
+                        "v_max); sets the limits' defaults and ranges", read_only=True,
+            additional_constraints="one of: pea, gma, custom"))
+        name = str(self.get_parameter("profile").value).strip().lower()
+        prof = None if name == "custom" else get_profile(name)  # ConfigError for a bad name → main()
+        given = (self._override("v_min"), self._override("v_max"))
+        for name, default, rng, text in param_table(prof, given):
             desc = ParameterDescriptor(description=text)
             if isinstance(default, (int, float)):
                 if rng is None:  # every number in the table has its range
@@ -142,6 +163,7 @@ class DriverNode(AtomicParametersNode):
         self.add_on_set_parameters_callback(self._on_set)
 
         c = self.cfg
+        lo, hi = (prof.v_min, prof.v_max) if prof else (c.v_min, c.v_max)
         adapter = make_adapter(c.protocol, c.counts_to_m, (lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)))
         self.link = DeviceLink(SerialTransport(c.port, c.baud), adapter, c.limits(), round(c.rate),
                                command_timeout=c.command_timeout, link_timeout=c.link_timeout)
@@ -165,6 +187,15 @@ class DriverNode(AtomicParametersNode):
                                f"scheduling {self.scheduling}")
 
     # ------------------------------------------------------------ parameters
+    def _override(self, name: str) -> float:
+        """The start-up value given for ``name`` (0.0 when none or not a number): ``profile custom`` takes its slew
+        and rest defaults from the range the user gives."""
+        p = self._parameter_overrides.get(name)
+        try:
+            return float(p.value) if p is not None else 0.0
+        except (TypeError, ValueError):
+            return 0.0
+
     def _read_config(self, changes: dict) -> DriverConfig:
         names = DriverConfig.__dataclass_fields__
         vals = {n: changes.get(n, self.get_parameter(n).value) for n in names}

@@ -218,7 +218,11 @@ class PtyEmulator:
 
 def _parse(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="hyst_emulator", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--profile", default="pea", choices=("pea", "gma"), help="actuator profile (default pea)")
+    ap.add_argument("--profile", default="pea", choices=("pea", "gma", "custom"),
+                    help="actuator profile (default pea); custom: another stage, with --params-file (its model), "
+                         "--v-min and --v-max (its amplifier's range, V)")
+    ap.add_argument("--v-min", type=float, default=None, help="profile custom: lowest voltage the stage takes, V")
+    ap.add_argument("--v-max", type=float, default=None, help="profile custom: highest voltage the stage takes, V")
     ap.add_argument("--rate", type=float, default=1000.0, help="sample rate, Hz (default 1000)")
     ap.add_argument("--link", default=None, help="stable port path to create (symlink to the pty)")
     ap.add_argument("--scenario", default=None, help="hidden-effects scenario file for the plant")
@@ -246,7 +250,8 @@ def main(argv: list[str] | None = None, *, build=None) -> int:
     argv : list of str, optional
         Command-line arguments (``sys.argv[1:]`` if omitted).
     build : callable, optional
-        ``build(profile, rate, scenario, params_file, seed) -> EmulatedDevice``; by default a linear stage
+        ``build(profile, rate, scenario, params_file, seed, v_range) -> EmulatedDevice`` (``v_range``: the
+        ``(v_min, v_max)`` given, or None); by default a linear stage
         (:func:`hyst_driver.linear_stage.linear_device`: the driver alone, no simulator); the console script
         ``hyst_emulator`` (:func:`hyst_bringup.emulator.main`) passes one on the sim's plant.
     """
@@ -255,7 +260,11 @@ def main(argv: list[str] | None = None, *, build=None) -> int:
     args = _parse(argv)
     try:
         rates = FaultRates.parse(args.faults)
-        dev = build(args.profile, args.rate, args.scenario, args.params_file, args.seed)
+        if (args.v_min is not None or args.v_max is not None) and args.profile != "custom":
+            raise ValueError("--v-min and --v-max set the range of a custom stage (--profile custom); the pea and "
+                             "gma profiles have their amplifiers' ranges")
+        v_range = None if args.v_min is None and args.v_max is None else (args.v_min, args.v_max)
+        dev = build(args.profile, args.rate, args.scenario, args.params_file, args.seed, v_range)
     except (ValueError, OSError) as err:
         print(f"hyst_emulator: {err}", file=sys.stderr)
         return 2
@@ -285,7 +294,8 @@ def main(argv: list[str] | None = None, *, build=None) -> int:
         return 2
     print(f"hyst_emulator: {args.profile} stage at {args.rate:g} Hz on {emu.link} (pty {emu.pty_name}); "
           f"protocols ascii (HDB/1) and gcs", flush=True)
-    print(f"  hyst_driver_node --ros-args -p port:={emu.link} -p profile:={args.profile}", flush=True)
+    rng = f" -p v_min:={args.v_min!r} -p v_max:={args.v_max!r}" if args.profile == "custom" else ""
+    print(f"  hyst_driver_node --ros-args -p port:={emu.link} -p profile:={args.profile}{rng}", flush=True)
     try:
         while True:
             time.sleep(3600)

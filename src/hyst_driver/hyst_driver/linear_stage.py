@@ -97,12 +97,13 @@ class LinearStage:
 
 
 def linear_device(profile: str = "pea", rate: float = 1000.0, scenario: str | None = None,
-                  params_file: str | None = None, seed: int = 0) -> EmulatedDevice:
+                  params_file: str | None = None, seed: int = 0,
+                  v_range: tuple[float | None, float | None] | None = None) -> EmulatedDevice:
     """An :class:`~.emulated_device.EmulatedDevice` on a :class:`LinearStage` of a profile (the emulator's
-    default ``build``). ``scenario`` and ``params_file`` describe a hysteretic stage: refused here with the way
-    to get one."""
-    if scenario or params_file:
-        raise ConfigError("--scenario and --params-file need the simulated stage: use hyst_emulator "
+    default ``build``). ``scenario`` and ``params_file`` describe a hysteretic stage, and ``profile custom`` (with
+    ``v_range``) another stage's model: refused here with the way to get one."""
+    if scenario or params_file or profile == "custom":
+        raise ConfigError("--scenario, --params-file and --profile custom need the simulated stage: use hyst_emulator "
                           "(package hyst_bringup), which runs the emulator on the sim's plant")
     p = get_profile(profile)
     return EmulatedDevice(LinearStage(p, rate, seed=seed), p.sensor_resolution)

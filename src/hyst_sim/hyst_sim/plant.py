@@ -212,7 +212,7 @@ class Plant:
         if not isinstance(cfg, PlantConfig):
             raise ConfigError("Plant needs a PlantConfig")
         p = np.ascontiguousarray(cfg.mbw.vector)
-        stroke = cfg.stroke or rest_stroke(cfg.mbw, p, cfg.v_min, cfg.v_max)
+        stroke = cfg.stroke or rest_stroke(cfg.mbw, cfg.v_min, cfg.v_max)
         check_bounded(cfg, p, stroke)
         e = cfg.effects
         lo, hi = stroke

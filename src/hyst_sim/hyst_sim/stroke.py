@@ -5,14 +5,14 @@ import math
 
 import numpy as np
 
-from hyst_model.core import MBWParams, mbw_rest_state
+from hyst_model.core import MBWParams
 
 from .errors import ConfigError
 
 __all__ = ["rest_stroke", "check_bounded"]
 
 
-def rest_stroke(mbw: MBWParams, p: np.ndarray, v_min: float, v_max: float) -> tuple[float, float]:
+def rest_stroke(mbw: MBWParams, v_min: float, v_max: float) -> tuple[float, float]:
     """``(x_lo, x_hi)``: displacement (m) at ``v_min`` and ``v_max`` held at rest.
 
     Raises
@@ -20,8 +20,7 @@ def rest_stroke(mbw: MBWParams, p: np.ndarray, v_min: float, v_max: float) -> tu
     ConfigError
         The model has no finite increasing rest displacement over the range.
     """
-    lo = mbw.y_scale * mbw_rest_state(p, v_min / mbw.u_scale) + mbw.offset
-    hi = mbw.y_scale * mbw_rest_state(p, v_max / mbw.u_scale) + mbw.offset
+    lo, hi = mbw.rest_output(v_min), mbw.rest_output(v_max)
     if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
         raise ConfigError("the MBW model has no finite, increasing rest displacement over [v_min, v_max]; "
                           "check the params file")

@@ -103,6 +103,11 @@ class MBWParams:
         """Remark 4.1: α1 < −|ψ1| and α2 < −|ψ2| keep μ positive so ν takes the sign of the numerator."""
         return self.alpha1 < -abs(self.psi1) and self.alpha2 < -abs(self.psi2)
 
+    def rest_output(self, v: float) -> float:
+        """Displacement (m) with ``v`` (V) held for a long time: the rest state the simulation starts from (nan where
+        the recursion has no rest state there)."""
+        return float(self.y_scale * mbw_rest_state(self.vector, float(v) / self.u_scale) + self.offset)
+
     def simulate(self, u: np.ndarray, *, from_rest: bool = True) -> np.ndarray:
         """Simulate in SI units: input volts, output metres.
 
