@@ -23,7 +23,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, SetParametersResult
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -83,8 +83,29 @@ class AtomicParametersNode(Node):
         if services:
             self._parameter_service = _AllOrNothingService(self)
 
+    def declare_parameter(self, name: str, value: Any = None, descriptor: ParameterDescriptor | None = None,
+                          ignore_override: bool = False) -> Parameter:
+        """As rclpy's, but a whole number given for a floating-point parameter (``-p v_max:=100``, ``zeta1: 1`` in a
+        params file) is that number as a float: rclpy refused it at start ("expecting type 'DOUBLE'")."""
+        over = self._parameter_overrides.get(name)
+        if isinstance(value, float) and over is not None and over.type_ == Parameter.Type.INTEGER:
+            self._parameter_overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(over.value))
+        return super().declare_parameter(name, value, descriptor, ignore_override)
+
+    def _as_declared(self, p: Parameter) -> Parameter:
+        """A whole number set for a declared floating-point parameter, as that float (see :meth:`declare_parameter`)."""
+        if p.type_ == Parameter.Type.INTEGER and self.has_parameter(p.name) \
+                and self.get_parameter(p.name).type_ == Parameter.Type.DOUBLE:
+            return Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+        return p
+
+    def set_parameters_atomically(self, parameter_list: Sequence[Parameter]) -> SetParametersResult:
+        """As rclpy's, whole numbers for floating-point parameters taken as floats (the atomic service too)."""
+        return super().set_parameters_atomically([self._as_declared(p) for p in parameter_list])
+
     def set_parameters(self, parameter_list: Sequence[Parameter]) -> list[SetParametersResult]:
-        """Validate ``parameter_list`` as one configuration and apply it whole or not at all."""
+        """Validate ``parameter_list`` as one configuration and apply it whole or not at all (whole numbers for
+        floating-point parameters taken as floats)."""
         result = self.set_parameters_atomically(list(parameter_list))
         return [result] * len(parameter_list)
 

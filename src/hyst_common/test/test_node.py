@@ -85,6 +85,23 @@ def test_the_remote_service_is_all_or_nothing_too(ctx):
         node.destroy_node()
 
 
+def test_a_whole_number_for_a_float_parameter_is_that_number(ctx):
+    """``-p v_max:=100`` (or ``zeta1: 1`` in a params file) is an INTEGER to ROS: rclpy refused it at start
+    ("expecting type 'DOUBLE'") and in every set; it is the float it says, while a string stays refused."""
+    node = Window(context=ctx, cli_args=["--ros-args", "-p", "v_max:=100"])
+    try:
+        v = node.get_parameter("v_max")
+        assert v.value == 100.0 and v.type_ == Parameter.Type.DOUBLE
+        assert node.set_parameters([Parameter("v_min", value=-5)])[0].successful
+        assert node.get_parameter("v_min").value == -5.0 and node.get_parameter("v_min").type_ == Parameter.Type.DOUBLE
+        assert node.set_parameters_atomically([Parameter("v_max", value=120)]).successful
+        assert node.get_parameter("v_max").value == 120.0
+        assert not node.set_parameters([Parameter("v_max", value="120")])[0].successful
+        assert not node.set_parameters([Parameter("v_max", value=500)])[0].successful  # the range still holds
+    finally:
+        node.destroy_node()
+
+
 RUNNER = r'''
 import sys
 from rcl_interfaces.msg import ParameterDescriptor
