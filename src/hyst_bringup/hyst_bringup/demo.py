@@ -1,7 +1,8 @@
 """``hyst demo``: the closed loop on the embedded default stage, a bag under ``bags/``, a tracking summary.
 
 Runs ``hyst_loop_node`` (simulated stage + reference + controller in one process at 2 kHz) through a schedule
-of algorithms (default DPPC, DMRAC, PID, 2 s each, on a 5 Hz, 10 µm sine about 15 µm) while ``hyst_bag_record``
+of algorithms (default DPPC, DMRAC, PID, 2 s each, on a 5 Hz, 10 µm sine about 15 µm; ``--profile gma``: the GMA's
+embedded stage, the sine placed on its rest stroke as on the PEA's, ±6.7 µm about 0) while ``hyst_bag_record``
 records ``/stage/state``, ``/stage/command``, ``/stage/reference`` and ``/controller/state``. Prints RMSE/MAE per
 algorithm (from the controller node's own statistics) and the bag path; exits non-zero when the loop did not run.
 Executables are found next to the Python interpreter (venv) or, in a colcon install, under
@@ -18,9 +19,12 @@ import sys
 import time
 from pathlib import Path
 
+from hyst_common.profiles import get_profile
 from hyst_common.runtime import stop_processes
 from hyst_control.controllers import parse_schedule
 from hyst_control.errors import LoopError
+from hyst_control.reference import parse_reference
+from hyst_model.core import stage_model
 from hyst_sim.bagio import default_bag_path
 
 from .loop import warm_up
@@ -54,6 +58,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("demo", help="closed loop on the simulated stage, record a bag, print a summary",
                               description=__doc__.split("\n\n")[0])
     p.add_argument("--schedule", default="dppc:2,dmrac:2,pid:2", help="ALG:SECONDS,... (default %(default)s)")
+    p.add_argument("--profile", choices=("pea", "gma"), default="pea",
+                   help="embedded stage: pea (0-150 V, 30 um; default) or gma (+-5 V, +-20 um)")
     p.add_argument("--rate", type=float, default=2000.0, help="loop rate (Hz), default 2000")
     p.add_argument("--frequency", type=float, default=5.0, help="sine frequency (Hz), default 5")
     p.add_argument("--bags", type=Path, default=Path("bags"), help="directory for the bag (default bags/)")
@@ -84,7 +90,12 @@ def run(args: argparse.Namespace) -> int:
     ros = ["--ros-args", "-p", f"rate:={args.rate}", "-p", "shape:=sine", "-p", f"frequency:={args.frequency}",
            # real-time scheduling as on a rig (hyst_common.runtime): with it PID's worst error in this demo fell
            # from 10-14 µm to 0.5-0.7 µm in most runs on the test machine (one run of five: 8.7 µm)
-           "-p", f"hyst_sim:rt_priority:={args.rt_priority}", "-p", f"hyst_controller:rt_priority:={args.rt_priority}"]
+           "-p", f"hyst_sim:rt_priority:={args.rt_priority}", "-p", f"hyst_controller:rt_priority:={args.rt_priority}",
+           "-p", f"hyst_sim:profile:={args.profile}", "-p", f"hyst_controller:profile:={args.profile}"]
+    if args.profile != "pea":  # the sine sits on this stage's rest stroke as it sits on the PEA's (the controller
+        m, lim = stage_model(args.profile), get_profile(args.profile)  # places its own spec alike, lockstep)
+        ref = parse_reference(f"sine:{args.frequency}", stroke=(m.rest_output(lim.v_min), m.rest_output(lim.v_max)))
+        ros += ["-p", f"hyst_reference:offset:={ref.offset!r}", "-p", f"hyst_reference:amplitude:={ref.amplitude!r}"]
     if args.lockstep:
         ros += ["-p", "hyst_sim:mode:=lockstep", "-p", f"hyst_controller:reference:=sine:{args.frequency}",
                 "-p", "hyst_controller:watchdog_periods:=1000000"]  # lockstep may pause; the stage is not lost
@@ -94,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
                              "--summary-json", "--wait-subscribers", "2", *ros], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     print(f"hyst demo: {', '.join(f'{a} {d:g} s' for a, d in schedule)} at {args.rate:g} Hz on a "
-          f"{args.frequency:g} Hz sine; recording {bag}", flush=True)
+          f"{args.frequency:g} Hz sine, {args.profile.upper()} stage; recording {bag}", flush=True)
     try:
         out, err = loop.communicate(timeout=3 * seconds + 30)  # a segment may stretch (composed.SEGMENT_STRETCH)
     except subprocess.TimeoutExpired:

@@ -26,6 +26,23 @@ def test_demo_records_a_bag_and_prints_the_summary(tmp_path):
     assert len(states.stamp_ns) > 1000 and len(cmds.stamp_ns) > 1000
 
 
+def test_demo_on_the_gma_runs_its_stage_and_places_the_sine_on_its_stroke(tmp_path):
+    """--profile gma: the GMA's embedded stage at ±5 V; the sine about 0 µm (on the PEA's 5–25 µm it would leave
+    the GMA's ±20 µm stroke at its top)."""
+    import numpy as np
+
+    proc = subprocess.run([HYST, "demo", "--profile", "gma", "--lockstep", "--schedule", "dppc:1", "--bags",
+                           str(tmp_path)], capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0 and "GMA stage" in proc.stdout, proc.stdout + proc.stderr
+    rows = {ln.split()[0]: ln.split() for ln in proc.stdout.splitlines() if ln.startswith("dppc ")}
+    assert float(rows["dppc"][2]) < 0.01
+    bag = next(tmp_path.glob("demo_*"))
+    y = np.asarray(read_joint_states(bag, "/stage/state").position)
+    u = np.asarray(read_joint_states(bag, "/stage/command").effort)
+    assert y.min() < -5e-6 and y.max() > 5e-6 and abs(0.5 * (y.min() + y.max())) < 2e-6
+    assert u.min() < -1.0 and u.max() > 1.0 and u.min() >= -5.0 and u.max() <= 5.0
+
+
 def test_demo_refuses_a_bad_schedule_with_one_line(tmp_path):
     proc = subprocess.run([HYST, "demo", "--schedule", "dppc:1,lqr:1", "--bags", str(tmp_path)],
                           capture_output=True, text=True, timeout=60)
