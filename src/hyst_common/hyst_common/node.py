@@ -86,10 +86,16 @@ class AtomicParametersNode(Node):
     def declare_parameter(self, name: str, value: Any = None, descriptor: ParameterDescriptor | None = None,
                           ignore_override: bool = False) -> Parameter:
         """As rclpy's, but a whole number given for a floating-point parameter (``-p v_max:=100``, ``zeta1: 1`` in a
-        params file) is that number as a float: rclpy refused it at start ("expecting type 'DOUBLE'")."""
+        params file) is that number as a float: rclpy refused it at start ("expecting type 'DOUBLE'"); and an
+        empty list given for a list parameter is its default."""
         over = self._parameter_overrides.get(name)
         if isinstance(value, float) and over is not None and over.type_ == Parameter.Type.INTEGER:
             self._parameter_overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(over.value))
+        if isinstance(value, list) and over is not None and over.type_ == Parameter.Type.NOT_SET:
+            # ``name: []`` in a params file: ROS cannot type an empty list and left the parameter unset, which
+            # broke every "get all parameters" (a dump); the declared default stands (hyst's lists default to
+            # none, ``[""]``)
+            del self._parameter_overrides[name]
         return super().declare_parameter(name, value, descriptor, ignore_override)
 
     def _as_declared(self, p: Parameter) -> Parameter:

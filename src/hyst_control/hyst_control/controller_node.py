@@ -29,7 +29,6 @@ from typing import Any, Callable
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
@@ -78,8 +77,10 @@ class ControllerNode(AtomicParametersNode):
         self._source: Callable[[float], float] | None = None  # in-process reference r(t) (:meth:`follow`)
         self._last_state_wall: float | None = None
         self._tripped = False
-        self._n = dict.fromkeys(("states", "commands", "bad_states", "bad_refs", "watchdog_trips", "switches", "gaps",
-                                 "oscillations"), 0)
+        self._ramp_wall = 0.0  # monotonic time of the watchdog ramp's last step
+        self._n = dict.fromkeys(("states", "commands", "bad_states", "bad_refs", "unreachable_refs",
+                                 "watchdog_trips", "switches", "gaps", "oscillations"), 0)
+        self._n_seen = dict(self._n)  # the counts at the last /diagnostics: what is new since
         self._n_osc = 0           # oscillation-watch events of the running law already reported
         self._oscillation = ""    # the newest of them, kept on /diagnostics
         self._t_last: float | None = None  # stamp of the previous state
@@ -132,6 +133,9 @@ class ControllerNode(AtomicParametersNode):
                                                     floating_point_range=box))
         d("slew_max", lim.slew_max, ParameterDescriptor(description="command slew limit (V/s)",
                                                         floating_point_range=fp_range(1e-3, 1e9)))
+        d("safe_ramp_rate", 100.0, ParameterDescriptor(
+            description="rate of the watchdog's ramp to v_safe (V/s; as the driver's and the sim's own timeouts)",
+            floating_point_range=fp_range(1e-3, 1e9)))
         d("watchdog_periods", 100, ParameterDescriptor(
             description="no state for this many periods -> v_safe", integer_range=int_range(2, 1_000_000)))
         d("reference", "", ParameterDescriptor(
@@ -155,7 +159,7 @@ class ControllerNode(AtomicParametersNode):
             floating_point_range=fp_range(1.0, 10.0)))
         m = profile_model(custom_base(lim.v_min, lim.v_max) if custom else name)  # custom: the file's replace it
         d("model.base", "mbw", ParameterDescriptor(description="base model of the params file (controllers need mbw)"))
-        d("model.effects", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
+        d("model.effects", [""], ParameterDescriptor(
             description="effects of the params file (innermost first): those with an inverse are compensated "
                         "(creep, asymmetry, saturation, delay); the others are reported at start, on every "
                         "change and on /diagnostics, never silently dropped"))
@@ -301,6 +305,8 @@ class ControllerNode(AtomicParametersNode):
     def _on_reference(self, msg: JointState) -> None:
         if not msg.position or not math.isfinite(msg.position[0]):
             self._n["bad_refs"] += 1
+            self.get_logger().warning("reference without a finite position[0] ignored (the last one is held)",
+                                      throttle_duration_sec=1.0)
             return
         v = msg.velocity[0] if msg.velocity and math.isfinite(msg.velocity[0]) else 0.0
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
@@ -332,9 +338,18 @@ class ControllerNode(AtomicParametersNode):
             if self._ctrl is not None:
                 self._publish_command(msg.header.stamp, self._ctrl.last_command)  # answer: hold
             return
+        s = self._settings
+        u_read = float(msg.effort[0]) if msg.effort else None
+        why = s.plausible(float(msg.position[0]), u_read)
+        if why:  # one corrupt sample must not move the stage: held as a NaN is
+            self._n["bad_states"] += 1
+            self.get_logger().warning(f"state ignored, taken for a corrupt sample: {why}",
+                                      throttle_duration_sec=1.0)
+            if self._ctrl is not None:
+                self._publish_command(msg.header.stamp, self._ctrl.last_command)
+            return
         y = _F(msg.position[0])
         self._y = y
-        s = self._settings
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         if self._ctrl is None or self._tripped:
             u0 = _F(msg.effort[0]) if msg.effort and math.isfinite(msg.effort[0]) else s.limits.v_safe
@@ -364,6 +379,11 @@ class ControllerNode(AtomicParametersNode):
             st[2] = max(st[2], abs(e))
         r = self._target(t, y)
         self._pending = r
+        if s.stroke is not None and not s.reachable(r):
+            self._n["unreachable_refs"] += 1
+            self.get_logger().warning(f"reference {r:.6g} m is beyond the stage's travel {s.stroke[0]:.3g}..."
+                                      f"{s.stroke[1]:.3g} m (its rest displacement at v_min..v_max): the command "
+                                      "stays at its limit", throttle_duration_sec=5.0)
         ahead = float(getattr(self._ctrl, "preview", 0.0))
         u = self._ctrl.step(self._target(t, y, ahead) if ahead > 0 else r, y)
         self._publish_command(msg.header.stamp, u)
@@ -396,8 +416,16 @@ class ControllerNode(AtomicParametersNode):
         if not self._tripped:
             self._tripped = True
             self._n["watchdog_trips"] += 1
-            self.get_logger().error(f"no /stage/state for {silent:.3f} s: commanding v_safe = {s.limits.v_safe} V")
-        u = s.limits.apply(s.limits.v_safe, self._ctrl.last_command, 0.02)
+            self.get_logger().error(f"no /stage/state for {silent:.3f} s: ramping to v_safe = {s.limits.v_safe} V "
+                                    f"at {s.safe_ramp_rate:g} V/s")
+            self._ramp_wall = time.monotonic()
+        now = time.monotonic()
+        prev = self._ctrl.last_command
+        step = s.safe_ramp_rate * min(now - self._ramp_wall, 0.1)  # a late timer tick is no licence to jump
+        self._ramp_wall = now
+        target = s.limits.v_safe if not math.isfinite(prev) else \
+            prev + max(-step, min(step, s.limits.v_safe - prev))
+        u = s.limits.apply(target, prev, 0.02)
         getattr(self._ctrl, "inner", self._ctrl)._u_prev = u  # the watchdog owns the output while tripped
         self._publish_command(self.get_clock().now().to_msg(), u)
 
@@ -409,6 +437,13 @@ class ControllerNode(AtomicParametersNode):
             st.level, st.message = DiagnosticStatus.WARN, "waiting for /stage/state"
         else:
             st.level, st.message = DiagnosticStatus.OK, f"{self._settings.algorithm} running"
+        new = {k: self._n[k] - self._n_seen.get(k, 0) for k in ("bad_states", "bad_refs", "unreachable_refs")}
+        self._n_seen = dict(self._n)
+        said = {"bad_states": "corrupt or non-finite states ignored", "bad_refs": "non-finite references ignored",
+                "unreachable_refs": "references beyond the stage's travel"}
+        if any(new.values()):  # what went wrong since the last report, while it goes on
+            st.level = max(st.level, DiagnosticStatus.WARN)
+            st.message += "; " + ", ".join(f"{n} {said[k]}" for k, n in new.items() if n)
         if self._unused:  # whatever else is going on, the dropped model terms stay visible
             st.level = max(st.level, DiagnosticStatus.WARN)
             st.message += f"; {self._unused}"

@@ -10,6 +10,7 @@ from functools import lru_cache
 from typing import Any
 
 from hyst_common.limits import CommandLimits
+from hyst_common.profiles import get_profile
 from hyst_model.core import PARAM_NAMES, MBWParams, pea_default, stage_model
 from hyst_model.core.bounded import mbw_bounded
 
@@ -54,6 +55,31 @@ class ControllerSettings:
     stability: StabilityVerdict | None = None
     #: '' or why the model diverges within the command limits (the feedback laws run it; see controller_node).
     divergence: str = ""
+    #: The model's rest displacement at ``v_min`` and ``v_max`` (m), or None where it has none (a model pushed
+    #: that diverges): what the stage can reach, and what a sensor reading can plausibly be.
+    stroke: tuple[float, float] | None = None
+    #: Rate (V/s) of the watchdog's ramp to ``v_safe`` (as the driver's and the sim's own timeouts ramp).
+    safe_ramp_rate: float = 100.0
+
+    def plausible(self, y: float, u: float | None) -> str:
+        """'' for a state sample the stage can produce; else why it is taken for corrupt: a reading more than one
+        stroke beyond the model's travel (1e300 m, 1 m on a 30 µm stage), or an applied voltage more than a tenth
+        of the range beyond the limits (the amplifier cannot apply it)."""
+        if self.stroke is not None:
+            lo, hi = self.stroke
+            span = hi - lo
+            if not lo - span <= y <= hi + span:
+                return (f"position {y:.6g} m is beyond the stage's travel ({lo:.3g}..{hi:.3g} m) by more than its "
+                        "stroke")
+        lim = self.limits
+        margin = 0.1 * (lim.v_max - lim.v_min)
+        if u is not None and math.isfinite(u) and not lim.v_min - margin <= u <= lim.v_max + margin:
+            return f"applied voltage {u:.6g} V is beyond the limits {lim.v_min:g}..{lim.v_max:g} V"
+        return ""
+
+    def reachable(self, r: float) -> bool:
+        """False for a reference beyond the model's rest travel at the limits (the stage cannot hold it)."""
+        return self.stroke is None or self.stroke[0] <= r <= self.stroke[1]
 
     def compensation(self) -> Compensation:
         """A fresh compensation (its effects keep per-run state) for the model's effects."""
@@ -105,6 +131,12 @@ def model_divergence(algorithm: str, model: MBWParams, comp: Compensation | None
             "the predictors would refuse it; refit on a record with steps across the range")
 
 
+def _stroke(model: MBWParams, limits: CommandLimits) -> tuple[float, float] | None:
+    """The model's rest displacement at the command limits (m), None where it has no finite increasing one."""
+    lo, hi = model.rest_output(limits.v_min), model.rest_output(limits.v_max)
+    return (lo, hi) if math.isfinite(lo) and math.isfinite(hi) and hi > lo else None
+
+
 def _reference(spec: str, profile: str, model: MBWParams, limits: CommandLimits) -> Reference | None:
     """The internal reference of a spec: on the PEA's stroke as documented, on the model's own stroke (its rest
     displacement at ``v_min`` and ``v_max``) for any other profile — the GMA's ±20 µm holds no 5–25 µm sine."""
@@ -112,11 +144,11 @@ def _reference(spec: str, profile: str, model: MBWParams, limits: CommandLimits)
         return None
     if profile.strip().lower() == "pea":
         return parse_reference(spec)
-    lo, hi = model.rest_output(limits.v_min), model.rest_output(limits.v_max)
-    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+    stroke = _stroke(model, limits)
+    if stroke is None:
         raise ControlError(f"reference {spec!r}: the model has no finite, increasing rest displacement over "
                            f"v_min..v_max ({limits.v_min:g}..{limits.v_max:g} V) to place it on; check the model")
-    return parse_reference(spec, stroke=(lo, hi))
+    return parse_reference(spec, stroke=stroke)
 
 
 def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> ControllerSettings:
@@ -137,6 +169,13 @@ def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> Co
     if mdt > 0 and abs(mdt * rate - 1.0) > 1e-6:
         raise ControlError(f"the model was identified at dt = {mdt:g} s but rate = {rate:g} Hz: the MBW recursion "
                            f"is per sample, so set rate:={1.0 / mdt:g} (or refit the model at this rate)")
+    profile = str(get("profile")).strip().lower()
+    lo_v, hi_v = f(get("v_min")), f(get("v_max"))
+    if profile != "custom":
+        prof = get_profile(profile)  # ConfigError for an unknown name
+        if not prof.v_min <= lo_v < hi_v <= prof.v_max:
+            raise ControlError(f"need {prof.v_min:g} <= v_min < v_max <= {prof.v_max:g} V for profile {profile} "
+                               f"(the amplifier's range), got v_min={lo_v:g}, v_max={hi_v:g}")
     init = str(get("dmrac.initial")).lower()
     if init != "model" and init not in TABLE53:
         raise ControlError("dmrac.initial must be model, cs0, cs1, cs2 or cs3")
@@ -162,6 +201,7 @@ def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> Co
         watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
         dmrac_initial=init, model=model,
         reference=_reference(str(get("reference")), str(get("profile")), model, limits), stability=stab,
-        effects=effects, effect_values=evals, gain_sets=tuple(gains.items()), divergence=divergence)
+        effects=effects, effect_values=evals, gain_sets=tuple(gains.items()), divergence=divergence,
+        stroke=_stroke(model, limits), safe_ramp_rate=f(get("safe_ramp_rate")))
     make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init, s.compensation())  # checks all
     return s

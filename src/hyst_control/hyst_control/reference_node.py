@@ -2,7 +2,8 @@
 
 Parameters: ``shape`` (step, ramp, step+ramp, sine, c1, c2, c3, case3, constant), ``amplitude`` (m),
 ``frequency`` (Hz), ``offset`` (m), ``t0`` (s), ``rate`` (Hz), ``duration`` (s, 0 = forever; afterwards the last
-value is held). Time starts at the first publication and restarts when the shape changes. Every value is
+value is held). Time starts at the first publication and restarts when the shape changes; a sine whose frequency
+changes keeps its phase (no step, as a function generator sweeps). Every value is
 validated in the on-set callback (:class:`hyst_control.reference.Reference` checks it) and applied by swapping
 the frozen reference object.
 """
@@ -42,6 +43,8 @@ class ReferenceNode(AtomicParametersNode):
         self._rate = float(self.get_parameter("rate").value)
         self._duration = float(self.get_parameter("duration").value)
         self._t_start: int | None = None  # clock time (ns) of the first sample of this trajectory
+        self._t_last: int | None = None   # clock time (ns) of the newest sample
+        self._shift = 0.0  # s added to the trajectory's time: a sine's phase kept across frequency changes
         self._pub = self.create_publisher(JointState, "/stage/reference", 10)
         self._timer = self.create_timer(1.0 / self._rate, self._tick)
         self.add_on_set_parameters_callback(self._on_set)
@@ -63,10 +66,17 @@ class ReferenceNode(AtomicParametersNode):
 
     def _after_set(self, params) -> None:
         old = self._ref
-        self._ref = self._build()
+        self._ref = new = self._build()
         self._duration = float(self.get_parameter("duration").value)
-        if self._ref.shape != old.shape:
+        if new.shape != old.shape:
             self._t_start = None  # a new trajectory starts at its own t = 0
+            self._shift = 0.0
+        elif new.shape == "sine" and new.frequency != old.frequency and new.frequency > 0 \
+                and self._t_start is not None and self._t_last is not None:
+            # the phase reached so far, at the new frequency: f_new (t + shift') = f_old (t + shift), one period
+            t = (self._t_last - self._t_start) * 1e-9
+            cycles = old.frequency * (t + self._shift)
+            self._shift = (cycles % 1.0) / new.frequency - t
         rate = float(self.get_parameter("rate").value)
         if rate != self._rate:
             self._rate = rate
@@ -81,9 +91,10 @@ class ReferenceNode(AtomicParametersNode):
         """
         if self._t_start is None:
             self._t_start = t_ns
+        self._t_last = t_ns
         t = max(t_ns - self._t_start, 0) * 1e-9
         hold = self._duration > 0 and t > self._duration
-        r, v = self._ref.sample(min(t, self._duration) if hold else t)
+        r, v = self._ref.sample((min(t, self._duration) if hold else t) + self._shift)
         return float(r), 0.0 if hold or not math.isfinite(v) else float(v)
 
     def _tick(self) -> None:

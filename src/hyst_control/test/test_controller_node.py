@@ -337,3 +337,70 @@ def test_a_custom_stage_without_its_model_or_range_and_an_unknown_profile_are_re
     cli = tuple(_ten_volt_stage(tmp_path) if a == "STAGE" else a for a in cli)
     with pytest.raises(Exception, match=why):
         harness(*cli)
+
+
+def test_a_corrupt_state_is_held_like_a_nan_and_reported(harness):
+    """A finite but impossible sample (1e300 m, 1 m on a 30 µm stage, 1e300 V applied) stepped the command by
+    75 V; it is held as a NaN is, counted, and /diagnostics turns WARN while it happens."""
+    node, peer, ex, pub, got = harness("-p", "reference:=constant:15", "-p", "watchdog_periods:=100000")
+    assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
+    k = 0
+    for _ in range(10):
+        pub.publish(_state(k, 14e-6, 70.0))
+        k += 1
+        assert _spin_until(ex, lambda: len(got["cmd"]) >= k)
+    for y, u in ((1e300, 70.0), (1.0, 70.0), (-1.0, 70.0), (14e-6, 1e300)):
+        held = node._ctrl.last_command
+        pub.publish(_state(k, y, u))
+        k += 1
+        assert _spin_until(ex, lambda: len(got["cmd"]) >= k)
+        assert got["cmd"][-1].effort[0] == held, (y, u)
+    assert node.counts["bad_states"] == 4
+    assert _spin_until(ex, lambda: any(s.level == DiagnosticStatus.WARN and "corrupt" in s.message
+                                       for d in got["diag"] for s in d.status), timeout=5.0)
+    # a plausible sample is used again (a stage a little beyond its rest travel is no corrupt sample)
+    pub.publish(_state(k, 31e-6, 150.0))
+    assert _spin_until(ex, lambda: len(got["cmd"]) > k) and node.counts["bad_states"] == 4
+
+
+def test_the_watchdog_ramps_to_v_safe_instead_of_jumping(harness):
+    node, peer, ex, pub, got = harness("-p", "rate:=1000.0", "-p", "watchdog_periods:=20", "-p", "v_safe:=0.0",
+                                       "-p", "safe_ramp_rate:=200.0", "-p", "reference:=constant:15")
+    assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
+    for k in range(5):
+        pub.publish(_state(k, 15e-6, 75.0))
+        _spin_until(ex, lambda: len(got["cmd"]) > k)
+    n0 = len(got["cmd"])
+    start = got["cmd"][-1].effort[0]
+    assert start > 20.0
+    assert _spin_until(ex, lambda: got["cmd"][-1].effort[0] <= 1e-9, timeout=20.0)
+    u = [m.effort[0] for m in got["cmd"][n0 - 1:]]
+    steps = [a - b for a, b in zip(u, u[1:])]
+    assert min(steps) >= -1e-9 and max(steps) <= 200.0 * 0.1 + 1e-9  # down only, never more than 0.1 s of ramp
+    assert len(u) > 5  # a ramp, not a jump
+
+
+def test_a_reference_beyond_the_travel_is_reported_and_a_profile_range_is_kept(harness):
+    node, peer, ex, pub, got = harness("-p", "reference:=constant:45", "-p", "watchdog_periods:=100000")
+    assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
+    for k in range(3):
+        pub.publish(_state(k, 15e-6, 75.0))
+        assert _spin_until(ex, lambda: len(got["cmd"]) > k)
+    assert node.counts["unreachable_refs"] == 3
+    assert _spin_until(ex, lambda: any(s.level == DiagnosticStatus.WARN and "beyond the stage's travel" in s.message
+                                       for d in got["diag"] for s in d.status), timeout=5.0)
+    res = node.set_parameters([Parameter("v_max", value=200.0)])[0]  # the PEA amplifier stops at 150 V
+    assert not res.successful and "profile pea" in res.reason
+
+
+def test_every_parameter_can_be_read_back_as_a_dump_does(harness, tmp_path):
+    """model.effects was declared typed but without a value (and ``effects: []`` in a params file left it unset):
+    a get of all parameters — what a parameter dump does — then answered nothing."""
+    node, *_ = harness()
+    names = list(node._parameters)
+    assert len(node.get_parameters(names)) == len(names) and node.get_parameter("model.effects").value == [""]
+    p = tmp_path / "stage.yaml"
+    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      effects: []\n      zeta1: 0.45\n")
+    node, *_ = harness("--params-file", str(p))
+    assert node.get_parameter("model.effects").value == [""] and node._settings.effects == ()
+    assert len(node.get_parameters(list(node._parameters))) == len(node._parameters)

@@ -14,7 +14,8 @@ def _params(**over):
          "dmrac.initial": "model",
          "model.effects": (), "stability.policy": "derate", "stability.notch": True, "stability.gain_margin": 2.0,
          "v_min": PEA_LIMITS.v_min, "v_max": PEA_LIMITS.v_max, "slew_max": PEA_LIMITS.slew_max,
-         "v_safe": PEA_LIMITS.v_safe, "watchdog_periods": 100, "state_decimation": 10, "reference": ""}
+         "v_safe": PEA_LIMITS.v_safe, "safe_ramp_rate": 100.0, "watchdog_periods": 100, "state_decimation": 10,
+         "reference": ""}
     d.update({f"{a}.{n}": g.default for a, (_, spec) in GAINS.items() for n, g in spec.items()})
     d.update({f"model.{k}": float(getattr(m, k)) for k in MODEL_KEYS})
     d.update({k.replace("__", "."): v for k, v in over.items()})

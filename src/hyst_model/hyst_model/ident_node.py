@@ -49,6 +49,15 @@ USAGE = (
 )
 
 
+def _listed(v) -> tuple[str, ...]:
+    """A string-list parameter's items: ``[""]`` (the declared none) and unset are empty."""
+    return tuple(str(x) for x in (v or ()) if str(x))
+
+
+#: The effect settings as this node's parameters call them (the messages of :func:`~.spec.parse_effect_config`).
+_NAMES = ("effect_config", "effects")
+
+
 @dataclass(frozen=True)
 class IdentConfig:
     """Validated node settings (see the parameter descriptions in :meth:`IdentNode._declare`)."""
@@ -99,7 +108,7 @@ class IdentConfig:
         from .errors import HystError
         from .spec import build_model, parse_effect_config
         try:
-            user = parse_effect_config(self.effect_config, self.effects)
+            user = parse_effect_config(self.effect_config, self.effects, names=_NAMES)
             build_model(self.model, self.effects, {"dt": 1e-3, "u_scale": 1.0, "y_scale": 1.0, **user})
         except HystError as err:
             raise ValueError(str(err)) from err
@@ -121,7 +130,7 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     if cfg.effects:  # each effect's settings from the samples the fit scores, then the user's: as hyst fit does
         from .spec import effect_settings, parse_effect_config
         config.update(effect_settings(cfg.effects, rec.t, rec.u, rec.y, split))
-        config.update(parse_effect_config(cfg.effect_config, cfg.effects))  # checked when it was set
+        config.update(parse_effect_config(cfg.effect_config, cfg.effects, names=_NAMES))  # checked when it was set
     model = build_model(cfg.model, cfg.effects, config)
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed, split=split)
     constrained = None
@@ -207,7 +216,7 @@ class IdentNode(AtomicParametersNode):
     # parameters ------------------------------------------------------------------------------------------
     def _declare(self) -> None:
         d = self.declare_parameter
-        S = Parameter.Type.STRING_ARRAY
+        S = [""]  # none: a typed list without a value breaks a parameter dump (and ROS cannot type [])
         d("bags", S, ParameterDescriptor(description="bags (rosbag2 dirs or .mcap files) to fit at start"))
         d("watch_dir", "", ParameterDescriptor(description="folder watched for new bags ('' = off)"))
         d("poll_period", 2.0, ParameterDescriptor(description="folder scan period (s)",
@@ -248,13 +257,13 @@ class IdentNode(AtomicParametersNode):
             except ParameterUninitializedException:  # typed string arrays start unset: empty
                 return None
         return IdentConfig(
-            bags=tuple(get("bags") or ()), watch_dir=str(get("watch_dir")), poll_period=float(get("poll_period")),
+            bags=_listed(get("bags")), watch_dir=str(get("watch_dir")), poll_period=float(get("poll_period")),
             settle_time=float(get("settle_time")), topic=str(get("topic")), model=str(get("model")),
-            effects=tuple(get("effects") or ()), method=str(get("method")), seed=int(get("seed")),
+            effects=_listed(get("effects")), method=str(get("method")), seed=int(get("seed")),
             val_fraction=float(get("val_fraction")), params_file=str(get("params_file")),
             overwrite=bool(get("overwrite")), controller_node=str(get("controller_node")),
             push_timeout=float(get("push_timeout")), gaps=str(get("gaps")), admissible=bool(get("admissible")),
-            effect_config=tuple(get("effect_config") or ()))
+            effect_config=_listed(get("effect_config")))
 
     def _on_set(self, params) -> SetParametersResult:
         try:
@@ -383,8 +392,10 @@ class IdentNode(AtomicParametersNode):
             try:
                 r = f.result().result
                 ok = r.successful
-                self.get_logger().info(f"pushed model to {node_name}" if ok else
-                                       f"{node_name} rejected the model: {r.reason}")
+                if ok:
+                    self.get_logger().info(f"pushed model to {node_name}")
+                else:  # the controller runs on its old model: the user must hear it
+                    self.get_logger().error(f"{node_name} rejected the model: {r.reason}")
                 self._publish({"bag": summary["bag"], "push": "accepted" if ok else f"rejected: {r.reason}"})
             except Exception as err:  # noqa: BLE001 - service went away mid-call
                 self.get_logger().error(f"push to {node_name} failed: {err}")

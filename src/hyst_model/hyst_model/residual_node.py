@@ -38,7 +38,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from .core import mbw_rest_state, mbw_step
@@ -109,7 +108,7 @@ class ResidualNode(AtomicParametersNode):
             description="samples per re-simulation for models without a per-sample form",
             integer_range=int_range(1, 100_000)))
         d("model.base", "mbw", ParameterDescriptor(description="base model (params file model.base)"))
-        d("model.effects", Parameter.Type.STRING_ARRAY,
+        d("model.effects", [""],
           ParameterDescriptor(description="effects in order (params file model.effects); empty = base only"))
         # The model's keys depend on base + effects (and effect configuration such as dynamics.structure):
         # declare the configuration keys first, then every parameter of the model they build.
@@ -144,7 +143,7 @@ class ResidualNode(AtomicParametersNode):
     def _spec_names(self, changes: dict) -> tuple[str, list[str]]:
         base = str(self._get("model.base", changes))
         effects = self._get("model.effects", changes) or []
-        return base, [str(e) for e in effects]
+        return base, [str(e) for e in effects if str(e)]  # [""] is none
 
     def _config(self, changes: dict) -> dict:
         out = {}

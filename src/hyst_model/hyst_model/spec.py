@@ -58,14 +58,15 @@ def build_model(base: str, effects: Sequence[str] = (), config: Mapping[str, obj
         raise EffectError(f"unknown effect {err.args[0]!r}") from None
 
 
-def parse_effect_config(items: Sequence[str], effects: Sequence[str]) -> dict:
+def parse_effect_config(items: Sequence[str], effects: Sequence[str], *,
+                        names: tuple[str, str] = ("--config", "--effects")) -> dict:
     """``["dynamics.structure=feedback"]`` → ``{"dynamics.structure": "feedback"}`` (numbers as floats).
 
     Keys must belong to one of the listed effects (``<effect>.<key>``) and be one of its settings (what its
     :meth:`~hyst_model.effects.Effect.config` stores in a params file, in any of its variants): a mistyped key was
     silently ignored and the effect ran with its default (``drift.sid=sensor``). The effect itself checks the value.
     ``hyst fit --config``, ``hyst diagnose --config`` and the identification node's ``effect_config`` read their
-    items here.
+    items here; ``names`` are the two settings as the messages call them (the node's ``effect_config``, ``effects``).
 
     Raises
     ------
@@ -74,18 +75,19 @@ def parse_effect_config(items: Sequence[str], effects: Sequence[str]) -> dict:
     """
     from .effects.compose import effect_keys  # late: effects import the models
     out: dict = {}
+    opt, eff = names
     for item in items:
         key, sep, value = item.partition("=")
         key, value = key.strip(), value.strip()
         name = key.split(".", 1)[0]
         if not sep or "." not in key or not value:
-            raise DataError(f"--config needs EFFECT.KEY=VALUE, e.g. dynamics.structure=feedback, got {item!r}")
+            raise DataError(f"{opt} needs EFFECT.KEY=VALUE, e.g. dynamics.structure=feedback, got {item!r}")
         if name not in effects:
-            raise DataError(f"--config {key}: effect {name!r} is not in --effects ({', '.join(effects) or 'none'})")
+            raise DataError(f"{opt} {key}: effect {name!r} is not in {eff} ({', '.join(effects) or 'none'})")
         keys = effect_keys(name)
         known = None if keys is None else keys[0]
         if known is not None and key.split(".", 1)[1] not in known:
-            raise DataError(f"--config {key}: {name} has no setting {key.split('.', 1)[1]!r}; its settings are "
+            raise DataError(f"{opt} {key}: {name} has no setting {key.split('.', 1)[1]!r}; its settings are "
                             f"{', '.join(sorted(known)) or 'none'}")
         try:
             out[key] = float(value)

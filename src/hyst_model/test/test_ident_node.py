@@ -233,3 +233,21 @@ def test_effect_configuration_and_the_records_own_settings_reach_the_fit(tmp_pat
     for bad, why in ((("creep.form=powerlaw",), "creep.form"), (("dynamics.structure=series",), "dynamics")):
         with pytest.raises(ValueError, match=why):
             IdentConfig(effects=("creep",), effect_config=bad).validate()
+
+
+def test_every_parameter_can_be_read_back_and_an_effect_config_error_names_the_parameters(ctx):
+    """bags, effects and effect_config were declared typed without a value: a get of all parameters (a dump)
+    answered nothing; an effect_config refusal spoke of hyst fit's --config and --effects."""
+    node = IdentNode(context=ctx)
+    try:
+        names = list(node._parameters)
+        assert len(node.get_parameters(names)) == len(names)
+        assert node.get_parameter("bags").value == [""] and node._read().bags == () and node._read().effects == ()
+        r = node.set_parameters([Parameter("effect_config", Parameter.Type.STRING_ARRAY, ["creep.form=lags"])])[0]
+        assert not r.successful and "effect_config creep.form" in r.reason and "not in effects" in r.reason
+        ok = node.set_parameters_atomically([Parameter("effects", Parameter.Type.STRING_ARRAY, ["creep"]),
+                                             Parameter("effect_config", Parameter.Type.STRING_ARRAY,
+                                                       ["creep.form=lags"])])
+        assert ok.successful and node._read().effects == ("creep",)
+    finally:
+        node.destroy_node()

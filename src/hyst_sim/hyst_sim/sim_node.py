@@ -100,8 +100,8 @@ class SimNode(AtomicParametersNode):
         self._stamp_ns = 0               # lockstep clock (ns)
         self._last_msg: JointState | None = None
         self._answered = False
-        self._counts = dict.fromkeys(("samples", "clip_range", "clip_slew", "nonfinite", "bad_messages", "stale",
-                                      "timeouts", "late_ticks", "end_stop", "waits"), 0)
+        self._counts = dict.fromkeys(("samples", "clip_range", "clip_slew", "nonfinite", "rejected", "bad_messages",
+                                      "stale", "timeouts", "late_ticks", "end_stop", "waits"), 0)
         self._period_counts = dict(self._counts)
         self._timed_out = False
         self._lock = threading.Lock()    # the plant is stepped by the sampler and reconfigured by the executor
@@ -237,6 +237,10 @@ class SimNode(AtomicParametersNode):
     def _sample(self, v_cmd: float, stamp: Time) -> None:
         with self._lock:
             s = self._settings
+            span = s.v_max - s.v_min
+            huge = math.isfinite(v_cmd) and not s.v_min - span <= v_cmd <= s.v_max + span
+            if huge:  # as the driver's limiter: a corrupt or unit-confused command holds, it is not full scale
+                v_huge, v_cmd = v_cmd, self._plant.u_applied
             try:
                 r = self._plant.step(v_cmd)
             except SimError as err:  # a diverging user model: say so once per second, keep the node alive
@@ -245,6 +249,12 @@ class SimNode(AtomicParametersNode):
                 return
         self._k += 1
         self._count("samples")
+        if huge:
+            self._count("rejected")
+            self.get_logger().warning(
+                f"command {v_huge:.6g} V rejected, {r.u_applied:.6g} V held: more than the range's span outside "
+                f"[{s.v_min:g}, {s.v_max:g}] V (a corrupt or unit-confused command; the driver rejects it too)",
+                throttle_duration_sec=1.0)
         if r.clipped:
             if not math.isfinite(v_cmd):
                 self._count("nonfinite")
@@ -394,6 +404,8 @@ class SimNode(AtomicParametersNode):
             problems.append(f"{d['late_ticks']} missed periods")
         if d["bad_messages"]:
             problems.append(f"{d['bad_messages']} malformed commands")
+        if d["rejected"]:
+            problems.append(f"{d['rejected']} commands rejected (beyond the range by more than its span)")
         if d["end_stop"]:
             problems.insert(0, f"FAULT: stage on its end stop in {d['end_stop']} samples (the input drives the "
                                "model outside its travel)")
@@ -407,7 +419,8 @@ class SimNode(AtomicParametersNode):
         vals = {"mode": s.mode, "rate_hz": f"{s.rate:g}", "achieved_rate_hz": f"{d['samples'] / _DIAG_PERIOD:g}",
                 "samples": c["samples"], "v_applied": f"{self._plant.u_applied:.6g}",
                 "clipped_range": c["clip_range"], "clipped_slew": c["clip_slew"],
-                "nonfinite_commands": c["nonfinite"], "malformed_commands": c["bad_messages"],
+                "nonfinite_commands": c["nonfinite"], "rejected_commands": c["rejected"],
+                "malformed_commands": c["bad_messages"],
                 "stale_commands": c["stale"], "timeouts": c["timeouts"], "missed_periods": c["late_ticks"],
                 "end_stop_samples": c["end_stop"], "waits_for_slow_subscribers": c["waits"]}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]

@@ -73,7 +73,7 @@ def _lockstep_run(make, n, **params):
     assert rig.spin_until(lambda: len(rig.states) >= 1), "no initial state in lockstep"
     cmds = 60.0 + 50.0 * np.sin(2 * np.pi * np.arange(n) / 40.0)
     cmds[5] = np.nan
-    cmds[9] = 400.0
+    cmds[9] = 250.0  # clipped (beyond v_max by less than the span; more is rejected as the driver does)
     for k in range(n):
         last = rig.states[-1]
         rig.send(cmds[k], last.header.stamp)
@@ -100,7 +100,7 @@ def test_lockstep_is_deterministic_and_equals_the_offline_plant(rig_factory):
     offline = Plant(plant_config(rig.node._settings)).run(np.concatenate([[0.0], cmds]))
     np.testing.assert_array_equal(y, offline.y)                # bit for bit, noise included
     np.testing.assert_array_equal(u, offline.u_applied)
-    assert u[6] == u[5] and u[10] == 150.0                     # NaN held, 400 V clipped
+    assert u[6] == u[5] and u[10] == 150.0                     # NaN held, 250 V clipped
     assert rig.node.counts["stale"] >= n and rig.node.counts["nonfinite"] == 1
     rig.close()
     _, _, b = _lockstep_run(rig_factory, n, seed=5, rate=2000.0)
@@ -113,7 +113,7 @@ def test_realtime_clips_reports_and_ramps_to_safe_after_timeout(rig_factory):
     assert all(m.effort[0] == 0.0 for m in rig.states)         # rests at v_safe before any command
     t_end = time.monotonic() + 0.6
     while time.monotonic() < t_end:
-        rig.send(500.0)
+        rig.send(250.0)  # clipped (500 V, more than the span beyond 150 V, is rejected as the driver does)
         rig.spin_until(lambda: False, 0.02)
     efforts = [m.effort[0] for m in rig.states]
     assert max(efforts) == 150.0 and all(0.0 <= e <= 150.0 for e in efforts)
@@ -391,3 +391,17 @@ def test_a_custom_stage_without_its_model_or_range_is_refused_with_the_reason(tm
             SimNode(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_a_huge_command_is_rejected_and_held_as_the_driver_does(rig_factory):
+    """1e300 V (or 150000 meant as mV) was applied as full scale; as the driver's limiter, a command more than the
+    range's span outside it holds the last voltage and is counted; one just outside is clipped as before."""
+    rig = rig_factory(mode="lockstep", seed=1)
+    assert rig.spin_until(lambda: len(rig.states) >= 1), "no initial state in lockstep"
+    for k, c in enumerate((50.0, 1e300, 150000.0, -1e6, 200.0)):
+        last = rig.states[-1]
+        rig.send(c, last.header.stamp)
+        assert rig.spin_until(lambda: rig.states[-1].header.stamp != last.header.stamp), f"no state for {k}"
+    u = [m.effort[0] for m in rig.states[-5:]]
+    assert u[:4] == [50.0, 50.0, 50.0, 50.0] and u[4] == 150.0
+    assert rig.node._counts["rejected"] == 3 and rig.node._counts["clip_range"] == 1
