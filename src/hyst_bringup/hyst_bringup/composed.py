@@ -35,6 +35,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 
+from hyst_common.startup import end_quiet_start
 from hyst_control.controller_node import ControllerNode
 from hyst_control.controllers import parse_schedule
 from hyst_control.errors import ControlError
@@ -54,6 +55,7 @@ def _executor():
 
 def main(args=None) -> int:
     """Console script ``hyst_loop_node``."""
+    end_quiet_start()  # Ctrl-C from here: KeyboardInterrupt, caught below (the summary is still printed)
     argv = remove_ros_args(args=sys.argv if args is None else args)[1:]
     ap = argparse.ArgumentParser(prog="hyst_loop_node", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=None, help="stop after this many seconds")

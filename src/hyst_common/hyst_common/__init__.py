@@ -10,7 +10,8 @@
 * :mod:`hyst_common.node` — the one way to run a node (:func:`~hyst_common.node.run_node`) and all-or-nothing
   parameter sets (:class:`~hyst_common.node.AtomicParametersNode`): with the ``*_node.py`` modules, the only
   place that imports rclpy (docs/ARCHITECTURE.md);
-* :mod:`hyst_common.stopping` — the runner's stop flag and the watchdog that bounds a stop (rclpy-free).
+* :mod:`hyst_common.stopping` — the runner's stop flag and the watchdog that bounds a stop (rclpy-free);
+* :mod:`hyst_common.startup` — Ctrl-C while a node process is still importing: one line, exit 0.
 
 It depends on no other hyst package; every other package imports it first.
 """
@@ -20,5 +21,8 @@ from .blas import single_thread_blas
 single_thread_blas()
 
 from .errors import HystError  # noqa: E402 - after single_thread_blas(), which must run before numpy loads
+from .startup import quiet_start  # noqa: E402
+
+quiet_start()  # hyst_* executables only: a SIGINT before main takes over is one line, not a traceback
 
 __all__ = ["HystError", "single_thread_blas"]

@@ -34,6 +34,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from .errors import HystError
 from .runtime import own_args
+from .startup import end_quiet_start
 from .stopping import StopGuard
 
 __all__ = ["run_node", "AtomicParametersNode", "fp_range", "int_range", "STARTUP_ERRORS", "KEEP_ALL_RELIABLE"]
@@ -170,6 +171,7 @@ def run_node(make: Callable[..., NodeT], args: Sequence[str] | None = None, *, p
         print(f"{prog}: error: unexpected argument(s) {' '.join(own)}; settings are ROS parameters "
               "(--ros-args -p name:=value); see --help", file=sys.stderr)
         return 2
+    end_quiet_start()  # the guard takes the signals from here
     guard = StopGuard(prog, install=threading.current_thread() is threading.main_thread())
     try:
         try:

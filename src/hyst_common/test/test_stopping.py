@@ -115,3 +115,20 @@ def test_run_node_bounds_a_hanging_rclpy_teardown():
     code, out, err = _signalled(NODE_TEARDOWN_HANGS, ready="probe up")
     assert "on_exit ran, by_signal=True" in out, (out, err)
     assert code == 0 and "probe_node: stopping:" in err and "ROS teardown did not return" in err, err
+
+
+def test_a_sigint_while_a_hyst_executable_is_still_importing_is_one_line_and_exit_0():
+    """The first half second of a node is imports (numpy, numba, rclpy): a Ctrl-C there ended in a 50-line
+    KeyboardInterrupt traceback and exit 130. The signal is sent by the process itself, once hyst_common is
+    imported (no timing involved); a process that is not a hyst executable keeps Python's default."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.argv[0] = {name!r}; import os, signal, hyst_common, time; "
+            "os.kill(os.getpid(), signal.SIGINT); time.sleep(30)")
+    r = subprocess.run([sys.executable, "-c", code.format(name="/x/bin/hyst_controller_node")],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "interrupted while starting" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    r = subprocess.run([sys.executable, "-c", code.format(name="my_script.py")], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode != 0 and "KeyboardInterrupt" in r.stderr  # someone else's program: Python's behaviour

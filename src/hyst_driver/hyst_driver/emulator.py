@@ -27,6 +27,7 @@ import time
 import tty
 
 from hyst_common.runtime import set_realtime
+from hyst_common.startup import end_quiet_start
 
 from . import protocol_ascii as hdb
 from . import protocol_gcs as gcs
@@ -255,6 +256,7 @@ def main(argv: list[str] | None = None, *, build=None) -> int:
         (:func:`hyst_driver.linear_stage.linear_device`: the driver alone, no simulator); the console script
         ``hyst_emulator`` (:func:`hyst_bringup.emulator.main`) passes one on the sim's plant.
     """
+    end_quiet_start()  # Ctrl-C from here: KeyboardInterrupt, which stops the emulator cleanly
     if build is None:
         from .linear_stage import linear_device as build
     args = _parse(argv)
