@@ -33,6 +33,7 @@ from pathlib import Path
 from hyst_control.compensation import Compensation, from_params
 from hyst_control.controller_settings import model_divergence
 from hyst_control.controllers import ALGORITHMS, CONTROLLERS, make_controller, make_supervised, mismatched
+from hyst_common.argtypes import nonneg_int
 from hyst_common.errors import ConfigError as CommonConfigError
 from hyst_common.limits import CommandLimits
 from hyst_common.profiles import PEA_LIMITS, custom_base, custom_limits
@@ -86,7 +87,7 @@ def register(subparsers) -> None:
     p.add_argument("--notch", action=argparse.BooleanOptionalAction, default=True,
                    help="pid under --stability derate: also try a notch on the command at the resonance and run it "
                         "when it keeps more gain (default; the node's stability.notch)")
-    p.add_argument("--seed", type=int, default=0, help="sensor noise seed")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="sensor noise seed")
     p.add_argument("--params", default=None, metavar="P.yaml",
                    help="controller model from this params file (hyst fit / hyst diagnose --out); default: the "
                         "embedded stage model. Its effects are compensated unless --no-effects")

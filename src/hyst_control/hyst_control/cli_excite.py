@@ -19,6 +19,7 @@ import json
 import math
 import sys
 
+from hyst_common.argtypes import nonneg_int
 from hyst_common.errors import ConfigError as CommonConfigError
 from hyst_common.profiles import CUSTOM_SWING_TIME, CUSTOM_V_MAX, GMA_LIMITS, PEA_LIMITS, custom_limits
 from hyst_model.io.csvio import write_csv
@@ -65,7 +66,7 @@ def register(subparsers) -> None:
     p.add_argument("--f-lo", type=float, default=d.f_lo, help="multisine/sweep/noise lowest frequency (Hz)")
     p.add_argument("--f-hi", type=float, default=d.f_hi, help="multisine/sweep/noise highest frequency (Hz)")
     p.add_argument("--seconds", type=float, default=d.seconds, help="multisine, sweep and noise length (s)")
-    p.add_argument("--seed", type=int, default=d.seed, help="seed of step levels, multisine phases and noise")
+    p.add_argument("--seed", type=nonneg_int, default=d.seed, help="seed of step levels, multisine phases and noise")
     p.add_argument("--json", action="store_true", help="print one JSON object describing what was written")
     p.set_defaults(func=run)
 

@@ -26,6 +26,7 @@ import threading
 import time
 import tty
 
+from hyst_common.argtypes import nonneg_int
 from hyst_common.runtime import set_realtime
 from hyst_common.startup import end_quiet_start
 
@@ -229,7 +230,7 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--scenario", default=None, help="hidden-effects scenario file for the plant")
     ap.add_argument("--params-file", default=None, help="MBW params file for the plant")
     ap.add_argument("--faults", default="", help="random faults per line, e.g. garbage=0.001,unplug=1e-5")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=nonneg_int, default=0)
     ap.add_argument("--nice", type=int, default=0,
                     help="change the scheduling priority (negative = higher; needs privileges): a real DAQ bridge "
                          "has its own microcontroller and never waits for a busy host")

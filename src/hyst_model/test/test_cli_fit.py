@@ -121,3 +121,32 @@ def test_console_script_exit_code(tmp_path):
     r = subprocess.run([sys.executable, "-m", "hyst_model.cli.main", "fit", str(tmp_path / "nothing")],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "Traceback" not in r.stderr and "no such" in r.stderr
+
+
+@pytest.mark.parametrize("argv, why", [
+    (["--resample", "1e9"], "would make"),                 # 45 GiB of samples: a MemoryError traceback
+    (["--resample", "0"], "--resample: needs a finite number > 0"),  # silently no resampling
+    (["--method", "epso", "--seed", "-1"], "--seed: needs a whole number >= 0"),  # numpy's ValueError
+    (["--method", "epso", "--iterations", "0"], "--iterations: needs a whole number >= 1"),
+])
+def test_bad_numbers_are_one_line_and_exit_2(tmp_path, capsys, argv, why):
+    t, u, y = _data(600)
+    write_csv(tmp_path / "r.csv", {"t": t, "u": u, "y": y})
+    with pytest.raises(SystemExit) as e:  # argparse's own refusal, or hyst's one line
+        raise SystemExit(main(["fit", str(tmp_path / "r.csv"), "--quiet", *argv]))
+    assert e.value.code == 2 and why in _err(capsys)
+
+
+def test_a_report_directory_is_judged_before_the_diagnosis(tmp_path, capsys):
+    """A directory of the user's files was refused after the whole diagnosis — and after --out was written."""
+    t, u, y = _data(600)
+    write_csv(tmp_path / "r.csv", {"t": t, "u": u, "y": y})
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("precious")
+    out = tmp_path / "d.yaml"
+    assert main(["diagnose", str(tmp_path / "r.csv"), "--quiet", "--report", str(tmp_path / "mine"),
+                 "--out", str(out)]) == 2
+    assert "not a hyst report" in _err(capsys) and not out.exists()
+    (tmp_path / "f.yaml").write_text("x")
+    assert main(["diagnose", str(tmp_path / "r.csv"), "--quiet", "--report", str(tmp_path / "f.yaml")]) == 2
+    assert "is a file, not a directory" in _err(capsys)

@@ -84,3 +84,23 @@ def test_length_mismatch_is_an_error(tmp_path):
     with pytest.raises(HystError, match="same length"):
         write_report(tmp_path / "r", rec, yhat[:-1], st)
     assert not (tmp_path / "r").exists()
+
+
+def test_another_commands_report_needs_force_and_a_rerun_leaves_no_stale_plot(tmp_path):
+    """hyst compare then hyst diagnose into one directory: the diagnose report replaced the compare report
+    without a word (and one written after a diagnose kept its ladder plot)."""
+    from hyst_model.diagnose.report import check_report_dir
+
+    rec, yhat = _record()
+    st = compare_stats(rec.t, rec.u, rec.y, yhat)
+    d = tmp_path / "out"
+    ladder = [{"model": "mbw", "rmse": 3e-7, "rmse_train": 2.9e-7}, {"model": "mbw+creep", "rmse": 5e-8}]
+    write_report(d, rec, yhat, st, ladder=ladder, kind="diagnose")
+    assert (d / "ladder.png").exists()
+    with pytest.raises(HystError, match="holds a hyst diagnose report"):
+        check_report_dir(d, kind="compare")
+    with pytest.raises(HystError, match="holds a hyst diagnose report"):
+        write_report(d, rec, yhat, st, kind="compare")
+    check_report_dir(d, kind="diagnose")  # the same command's re-run is fine
+    write_report(d, rec, yhat, st, kind="compare", force=True)
+    assert not (d / "ladder.png").exists() and "hyst compare" in (d / MARKER).read_text()

@@ -18,6 +18,8 @@ import json
 import sys
 from typing import Any
 
+from hyst_common.argtypes import positive_int
+
 import numpy as np
 
 from ..diagnose.report import findings
@@ -44,8 +46,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="score only samples with T0 <= t < T1 (s); the model still runs over the whole record")
     p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
                    help="Python file with user effects the params file uses (repeatable)")
-    p.add_argument("--levels", type=int, default=5, help="number of input-level bins (default 5)")
-    p.add_argument("--lags", type=int, default=25, help="lags of the correlation tests (default 25)")
+    p.add_argument("--levels", type=positive_int, default=5, help="number of input-level bins (default 5)")
+    p.add_argument("--lags", type=positive_int, default=25, help="lags of the correlation tests (default 25)")
     from .fit import add_data_options
     add_data_options(p)  # --topic, --columns, --units, --gaps, --salvage, --resample: as fit and diagnose
     p.set_defaults(func=run)
@@ -168,6 +170,9 @@ def run(args: argparse.Namespace) -> int:
     if args.levels < 1 or args.lags < 1:
         raise DataError("--levels and --lags must be at least 1")
     window = _window(args.window)
+    if args.report:  # judged before the work, as the writer will
+        from ..diagnose.report import check_report_dir
+        check_report_dir(args.report, args.force, "compare")
     spec, rec, model, theta = _load(args)
     notes = []
     dt_fit = spec.config.get("dt")
@@ -186,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
     report_dir = None
     if args.report:
         from ..diagnose.report import write_report
-        report_dir = write_report(args.report, rec, yhat, st, force=args.force,
+        report_dir = write_report(args.report, rec, yhat, st, force=args.force, kind="compare",
                                   title=f"hyst compare: {rec.source} vs {args.params}")
     if args.json:
         d = {"data": rec.source, "params": str(args.params), "model": getattr(model, "name", "?"),

@@ -18,6 +18,8 @@ import math
 import os
 import sys
 
+from hyst_common.argtypes import positive_int
+
 __all__ = ["register", "run"]
 
 
@@ -45,7 +47,7 @@ def register(subparsers) -> None:
     p.add_argument("--force", action="store_true", help="allow --report/--out to replace existing output")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--quiet", action="store_true", help="no progress display on stderr")
-    p.add_argument("--jobs", type=int, default=None, metavar="N",
+    p.add_argument("--jobs", type=positive_int, default=None, metavar="N",
                    help="threads fitting the candidates side by side (default: the processors, at most 6; "
                         "the result does not depend on it)")
     from .fit import add_data_options
@@ -96,9 +98,12 @@ def run(args: argparse.Namespace) -> int:
     from ..io.outputs import check_output
     if getattr(args, "out", None):  # refuse now, not after minutes of fitting
         check_output(args.out, force=args.force, what="--out")
-    if getattr(args, "report", None) and not os.path.isdir(args.report):
-        # an existing directory is the report writer's to judge (it may rewrite its own report there)
-        check_output(args.report, force=args.force, what="--report", directory=True)
+    if getattr(args, "report", None):
+        if os.path.isdir(args.report):  # judged now as the writer will, not after the whole diagnosis
+            from ..diagnose.report import check_report_dir
+            check_report_dir(args.report, args.force, "diagnose")
+        else:
+            check_output(args.report, force=args.force, what="--report", directory=True)
     from ..diagnose.diagnose import diagnose
     from ..effects import load_effect_module
     from ..errors import EffectError, HystError
@@ -163,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
             rec2, yhat, st = compare_record(rec, model, theta)
             out = _report.write_report(args.report, rec2, yhat, st,
                                        ladder=[_clean(r.__dict__) for r in d.ladder],
-                                       diagnosis=_clean(d.to_json()), force=args.force,
+                                       diagnosis=_clean(d.to_json()), force=args.force, kind="diagnose",
                                        title=f"hyst diagnose: {rec.source} (plots: base model {d.base})")
             report_path = str(out / "index.html")
     if args.json:

@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hyst_common.argtypes import nonneg_int, positive_float, positive_int
+
 from ..errors import DataError, EffectError, HystError, ParamsError
 from ..spec import parse_effect_config as parse_config
 from ..identify.methods import METHODS
@@ -24,6 +26,12 @@ if TYPE_CHECKING:
     from ..io.record import Record
 
 __all__ = ["register", "run", "add_data_options", "load_checked", "parse_split", "parse_config"]
+
+
+#: ``--resample`` makes at most this many times the record's samples, and at most this many samples: a typo
+#: (1e9 Hz) allocated 45 GiB and ended in a MemoryError traceback.
+RESAMPLE_MAX_FACTOR = 50
+RESAMPLE_MAX_SAMPLES = 20_000_000
 
 
 def add_data_options(p: argparse.ArgumentParser) -> None:
@@ -39,7 +47,7 @@ def add_data_options(p: argparse.ArgumentParser) -> None:
                         "irregularity")
     p.add_argument("--salvage", action="store_true",
                    help="read an MCAP bag whose recorder was killed (no footer) up to its damaged end")
-    p.add_argument("--resample", type=float, metavar="HZ",
+    p.add_argument("--resample", type=positive_float, metavar="HZ",
                    help="resample to this rate before fitting (MBW's δ and rate terms are per sample)")
 
 
@@ -76,10 +84,12 @@ def load_checked(args) -> Record:
     units = rec.meta.get("units") or ("s", "V", "m")
     for warning in plausibility(rec.t, rec.u, rec.y, input_unit=str(units[1])):
         print(f"hyst: warning: {args.data}: {warning}", file=sys.stderr)
-    if args.resample:
-        if not args.resample > 0:
-            raise DataError("--resample must be positive")
+    if args.resample is not None:
         dt = 1.0 / args.resample
+        n = int((rec.t[-1] - rec.t[0]) / dt) + 1
+        if n > min(RESAMPLE_MAX_FACTOR * len(rec), RESAMPLE_MAX_SAMPLES):
+            raise DataError(f"--resample {args.resample:g} Hz would make {n} samples of the record's {len(rec)}: "
+                            f"at most {RESAMPLE_MAX_FACTOR}x as many and {RESAMPLE_MAX_SAMPLES:,} samples")
         t = np.arange(rec.t[0], rec.t[-1] + 0.5 * dt, dt)
         t = t[t <= rec.t[-1]]
         rec = Record(t, np.interp(t, rec.t, rec.u), np.interp(t, rec.t, rec.y), dict(rec.meta, resampled=args.resample))
@@ -94,8 +104,8 @@ def register(subparsers) -> None:
     p.add_argument("--model", default="mbw", help="base model: mbw (default), bw, pi")
     p.add_argument("--effects", default="", help="comma-separated effects composed onto the base, e.g. creep,delay")
     p.add_argument("--method", choices=tuple(METHODS), default="fast", help="identifier (default fast)")
-    p.add_argument("--seed", type=int, default=None, help="random seed (EPSO)")
-    p.add_argument("--iterations", type=int, default=None, help="EPSO iterations (default 200)")
+    p.add_argument("--seed", type=nonneg_int, default=None, help="random seed (EPSO)")
+    p.add_argument("--iterations", type=positive_int, default=None, help="EPSO iterations (default 200)")
     p.add_argument("--train", metavar="T0:T1", help="train on T0 <= t < T1 (s), validate on t >= T1")
     p.add_argument("--split", choices=("blocks", "tail"), default="blocks",
                    help="hold out --val-fraction in 8 interleaved blocks (default; what hyst diagnose does) or "

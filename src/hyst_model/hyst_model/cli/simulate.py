@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from hyst_common.argtypes import nonneg_int
+
 import numpy as np
 
 from ..errors import DataError, FitError
@@ -26,7 +28,7 @@ def register(subparsers) -> None:
     p.add_argument("--columns", help="input columns for t,u (default t,u)")
     p.add_argument("--units", help="units of those columns, e.g. ms,V")
     p.add_argument("--any-rate", action="store_true", help="allow a sample rate different from the fitted one")
-    p.add_argument("--steady-periods", type=int, default=0, metavar="N",
+    p.add_argument("--steady-periods", type=nonneg_int, default=0, metavar="N",
                    help="the input is one period of a periodic signal: run it N times from rest and write the "
                         "last period (steady state, as the Bouc-Wen benchmark scores its test); default 0 = once")
     p.add_argument("--force", action="store_true", help="overwrite --out")

@@ -32,7 +32,7 @@ import numpy as np
 from ..io.modes import mkstemp_user
 from ..errors import HystError
 
-__all__ = ["write_report", "findings", "MARKER", "prepare_dir"]
+__all__ = ["write_report", "findings", "MARKER", "prepare_dir", "check_report_dir"]
 
 #: A file hyst writes into every report directory; a directory without it but with other files is not ours.
 MARKER = ".hyst-report"
@@ -135,33 +135,67 @@ def findings(st) -> list[str]:
     return out
 
 
-def prepare_dir(path: str | os.PathLike, force: bool = False) -> Path:
-    """Create ``path`` or check that it is a previous hyst report (or empty); return it.
+def _marker_kind(d: Path) -> str | None:
+    """The command whose report ``d`` holds (``compare``, ``diagnose``), None for a marker without one."""
+    try:
+        words = (d / MARKER).read_text().split()
+    except OSError:
+        return None
+    return words[3].rstrip(";") if len(words) > 3 and words[:3] == ["written", "by", "hyst"] else None
+
+
+def check_report_dir(path: str | os.PathLike, force: bool = False, kind: str = "report") -> Path:
+    """Raise now, before any work, if ``path`` cannot take the report of ``kind`` (``compare``, ``diagnose``).
+
+    Refused without ``force``: a directory holding files hyst did not write, and another command's report (``hyst
+    compare`` and ``hyst diagnose`` into one directory: the second replaced the first's report without a word).
+    The same command's report there is replaced (a re-run).
 
     Raises
     ------
     HystError
-        ``path`` is a file, or a directory holding files hyst did not write (and ``force`` is false).
+        ``path`` is a file, or a directory refused as above.
     """
     d = Path(path)
     if d.exists() and not d.is_dir():
         raise HystError(f"report directory {d} is a file")
-    if d.is_dir():
+    if d.is_dir() and not force:
         names = {p.name for p in d.iterdir()}
         foreign = sorted(names - _OURS)
-        if names and MARKER not in names and not force:
+        if names and MARKER not in names:
             raise HystError(f"report directory {d} is not empty and not a hyst report "
                             f"(e.g. {', '.join(foreign[:3]) or ', '.join(sorted(names)[:3])}); "
                             "choose another directory or pass --force")
-        if foreign and not force:
+        if foreign:
             raise HystError(f"report directory {d} holds files hyst did not write ({', '.join(foreign[:3])}); "
                             "choose another directory or pass --force")
+        other = _marker_kind(d) if MARKER in names else None
+        if other is not None and other != kind:
+            raise HystError(f"report directory {d} holds a hyst {other} report; give the {kind} report its own "
+                            "directory or pass --force to replace it")
+    return d
+
+
+def prepare_dir(path: str | os.PathLike, force: bool = False, kind: str = "report") -> Path:
+    """Create ``path`` or check that it may take the report (:func:`check_report_dir`); return it, emptied of a
+    previous report's plots (a diagnose report's ladder plot stayed beside a compare report written after it).
+    """
+    d = check_report_dir(path, force, kind)
+    if d.is_dir():
+        for name in _OURS - {MARKER}:
+            try:
+                (d / name).unlink()
+            except FileNotFoundError:
+                pass
+            except OSError as err:
+                raise HystError(f"cannot replace {d / name}: {err}") from err
     else:
         try:
             d.mkdir(parents=True)
         except OSError as err:
             raise HystError(f"cannot create report directory {d}: {err}") from err
-    (d / MARKER).write_text("written by hyst; files listed in index.html are replaced on the next report\n")
+    (d / MARKER).write_text(f"written by hyst {kind}; files listed in index.html are replaced on the next "
+                            f"{kind} report\n")
     return d
 
 
@@ -318,15 +352,16 @@ def _nm(x: float) -> float:
 
 def write_report(dir: str | os.PathLike, record, model_output: np.ndarray, stats,
                  ladder: Sequence[Mapping[str, Any]] | None = None, diagnosis: Mapping[str, Any] | None = None,
-                 *, force: bool = False, title: str | None = None) -> Path:
-    """Write ``index.html`` and the PNG plots into ``dir`` (see the module docstring); return ``dir``."""
+                 *, force: bool = False, title: str | None = None, kind: str = "report") -> Path:
+    """Write ``index.html`` and the PNG plots into ``dir`` (see the module docstring); return ``dir``. ``kind``
+    names the command (``compare``, ``diagnose``): another command's report there needs ``force``."""
     t = np.asarray(record.t, float)
     u = np.asarray(record.u, float)
     y = np.asarray(record.y, float)
     yhat = np.asarray(model_output, float)
     if not (t.size == u.size == y.size == yhat.size) or t.size < 8:
         raise HystError("report: record and model output must have the same length (at least 8 samples)")
-    d = prepare_dir(dir, force)
+    d = prepare_dir(dir, force, kind)
     figs = _plots(d, t, u, y, yhat, stats, ladder)
     st = stats
     o = st.overall

@@ -28,8 +28,10 @@ def check_output(path: str | Path, *, force: bool = False, what: str = "output",
     except OSError as err:
         raise ParamsError(f"{what} {path}: {err.strerror or err}") from err
     if st is not None:
-        if directory != stat.S_ISDIR(st.st_mode) or not (stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode)):
-            kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+        if not (stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode)):
+            raise ParamsError(f"{what} {path} is not a regular file or directory")
+        if directory != stat.S_ISDIR(st.st_mode):
+            kind = "a directory, not a file" if stat.S_ISDIR(st.st_mode) else "a file, not a directory"
             raise ParamsError(f"{what} {path} is {kind}")
         if not force:
             raise ParamsError(f"{what} {path} exists; use --force to overwrite it")
