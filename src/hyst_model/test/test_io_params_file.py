@@ -1,5 +1,6 @@
 """Params file: ROS 2 parameters YAML round trip, no overwrite without force, atomic writes."""
 import os
+import re
 
 import numpy as np
 import pytest
@@ -162,3 +163,36 @@ def test_a_key_no_effect_has_is_refused_and_every_variants_keys_are_read(tmp_pat
     (tmp_path / "typo.yaml").write_text(yaml.safe_dump(doc))
     with pytest.raises(ParamsError, match=r"model\.drift\.sid is none of drift's parameters or settings \(.*side"):
         read_params(tmp_path / "typo.yaml")
+
+
+def _mbw_file(tmp_path, extra: str, name: str = "p.yaml"):
+    from hyst_model.core import pea_default
+
+    m = pea_default()
+    body = "".join(f"      {k}: {v!r}\n" for k, v in m.to_dict().items() if k not in extra)
+    p = tmp_path / name
+    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n      u_scale: 1.0\n      y_scale: 1.0e-6\n"
+                 + body + extra)
+    return p
+
+
+def test_numbers_yaml_1_1_leaves_as_strings_are_numbers_and_words_are_refused(tmp_path):
+    """PyYAML reads 1e-6 (no decimal point) as a string: 'lacks model parameter zeta2' for a key that was there."""
+    from hyst_model.io import read_params
+
+    spec = read_params(_mbw_file(tmp_path, "      zeta2: 1e-6\n      dt: 1e-3\n"))
+    assert spec.values["zeta2"] == 1e-6 and spec.config["dt"] == 1e-3
+    with pytest.raises(ParamsError, match=r"model\.zeta2 is not a number \('abc'\)"):
+        read_params(_mbw_file(tmp_path, "      zeta2: abc\n"))
+
+
+@pytest.mark.parametrize(("extra", "why"), [
+    ("      zeta3: 0.5\n", "model.zeta3: not a parameter or setting of mbw"),
+    ("      creep:\n        gain: 0.5\n", "effect 'creep' is not in model.effects"),
+])
+def test_a_key_the_model_cannot_use_is_refused_not_ignored(tmp_path, extra, why):
+    """An unknown key (a typo) and an effect's section without the effect listed ran as if absent."""
+    from hyst_model.io import read_params
+
+    with pytest.raises(ParamsError, match=re.escape(why)):
+        read_params(_mbw_file(tmp_path, extra))

@@ -114,7 +114,8 @@ def register(subparsers) -> None:
                    help="effect configuration, e.g. dynamics.structure=feedback or delay.side=output (repeatable; "
                         "hyst diagnose writes the ones it chose into its params file)")
     p.add_argument("--val-fraction", type=float, default=0.25,
-                   help="hold out the last fraction of the record for validation (default 0.25; 0 = none)")
+                   help="hold out this fraction of the record for validation, in 8 interleaved blocks or as the "
+                        "tail (--split; default 0.25; 0 = none)")
     p.add_argument("--admissible", action="store_true",
                    help="enforce the thesis's Remark 4.1 (alpha_i < -|psi_i|) so DPPC/DMRAC run their own law: a "
                         "free fit that violates it is refitted with the constraint (both RMSEs reported)")
@@ -216,7 +217,8 @@ def run(args) -> int:
 def _table(res, rec, out, adm) -> str:
     lines = [f"model {res.model}  method {res.method}  {len(rec)} samples at {1.0 / rec.dt:.6g} Hz  "
              f"{res.seconds:.2f} s  {res.n_evaluations} evaluations",
-             f"RMSE validation {res.rmse * 1e9:.2f} nm   training {res.rmse_train * 1e9:.2f} nm",
+             (f"RMSE validation {res.rmse * 1e9:.2f} nm   training {res.rmse_train * 1e9:.2f} nm" if res.validated
+              else f"RMSE training {res.rmse_train * 1e9:.2f} nm   (no validation samples: nothing held out)"),
              f"split: {res.split}", "", f"{'parameter':<16}{'value':>16}"]
     lines += [f"{k:<16}{v:>16.8g}" for k, v in res.params.items()]
     lines += ["", f"controllers: {adm.controllers}"]

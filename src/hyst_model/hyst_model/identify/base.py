@@ -270,6 +270,9 @@ class Estimator:
         split = make_split(t, self.split)
         if np.ptp(u[:split.train_stop]) == 0:
             raise FitError("the input does not vary up to the end of the training window: nothing to identify")
+        if np.ptp(y[split.train_index()]) == 0:  # a dead or unplugged sensor: a fit made a model of nothing
+            raise FitError("the output does not vary on the training samples: nothing to identify (is the sensor "
+                           "connected?)")
         t0 = time.perf_counter()
         problem = TrainProblem(self.model, t, u, y, split)
         theta, n_iter, history, message = self._solve(problem)
@@ -287,5 +290,6 @@ class Estimator:
         self.result_ = FitResult(model=model_label(self.model), method=self.method, params=dict(self.params_),
                                  theta=self.theta_, rmse_train=r_tr, rmse=r_val, seconds=seconds,
                                  n_evaluations=problem.n_eval, n_iterations=int(n_iter), residuals=res,
-                                 split=split.description, cost=r_tr, history=list(history), message=message)
+                                 split=split.description, cost=r_tr, history=list(history), message=message,
+                                 validated=split.has_validation)
         return self

@@ -212,6 +212,8 @@ class FitResult:
         Final training cost (RMSE, m).
     history : list of float
         Best training RMSE per iteration (EPSO) or per start (fast).
+    validated : bool
+        False when the split left no validation samples (``rmse`` is then the training RMSE).
     """
 
     model: str
@@ -228,6 +230,7 @@ class FitResult:
     cost: float = float("nan")
     history: list = field(default_factory=list)
     message: str = ""
+    validated: bool = True
 
     def to_dict(self) -> dict:
         """JSON-friendly summary (no residual array)."""

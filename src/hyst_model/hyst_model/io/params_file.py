@@ -23,6 +23,7 @@ directory) and never replace an existing file unless ``force=True``; without ``f
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +34,9 @@ import yaml
 from .modes import mkstemp_user
 from ..errors import HystError, ParamsError
 from ..model import Model
+
+#: A number as YAML 1.2 reads it, which PyYAML's YAML 1.1 leaves a string without a decimal point (``1e-6``).
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
 
 __all__ = ["ParamsSpec", "read_params", "write_params", "spec_from_model", "to_yaml", "flatten", "nest"]
 
@@ -235,7 +239,9 @@ def read_params(path: str | Path) -> ParamsSpec:
     fit = section.get("fit") or {}
     if not isinstance(fit, Mapping):
         raise ParamsError(f"{path}: 'fit' must be a mapping of provenance keys, not {type(fit).__name__}")
-    flat = flatten(model)
+    # YAML 1.1 (PyYAML) reads 1e-6 (no decimal point) as a string: "lacks zeta2" for a key that is there
+    flat = {k: (float(v) if isinstance(v, str) and _NUMBER.fullmatch(v.strip()) else v)
+            for k, v in flatten(model).items()}
     for k, v in flat.items():
         if isinstance(v, bool) or not isinstance(v, (int, float, str)):
             raise ParamsError(f"{path}: model.{k} has an unsupported value {v!r}")
@@ -250,6 +256,18 @@ def read_params(path: str | Path) -> ParamsSpec:
         raise ParamsError(f"{path}: invalid model configuration ({err})") from err
     names = set(m.names)
     _check_effect_keys(path, spec.effects, flat)
+    words = sorted(k for k in names if isinstance(flat.get(k), str))
+    if words:
+        raise ParamsError(f"{path}: model.{words[0]} is not a number ({flat[words[0]]!r})")
+    known = names | set(m.config()) | {"dt"}  # a listed effect's own keys are _check_effect_keys' to judge
+    unknown = sorted(k for k in flat if k not in known and k.split(".", 1)[0] not in spec.effects)
+    if unknown:  # a typo (zetta1) or an effect's section without the effect listed: silently unused before
+        k = unknown[0]
+        head = k.split(".", 1)[0]
+        hint = (f"effect {head!r} is not in model.effects ({', '.join(spec.effects) or 'none'})" if "." in k else
+                f"not a parameter or setting of {'+'.join([base, *spec.effects])} (parameters: {', '.join(m.names)})")
+        raise ParamsError(f"{path}: model.{k}: {hint}; remove or correct it"
+                          + (f" (and {len(unknown) - 1} more)" if len(unknown) > 1 else ""))
     spec.values = {k: float(v) for k, v in numeric.items() if k in names}
     spec.config = {k: v for k, v in flat.items() if k not in names}
     bad = [k for k, v in spec.values.items() if not np.isfinite(v)]
