@@ -62,8 +62,9 @@ def register(subparsers) -> None:
     """Add the ``track`` subcommand to the ``hyst`` dispatcher."""
     p = subparsers.add_parser(
         "track", help="closed loop on the simulated stage (no ROS): RMSE/MAE of a controller",
-        description="Run a controller against the default simulated PEA stage (2 nm noise, 2 nm quantisation) "
-                    "tracking a reference; print RMSE and MAE in metres.")
+        description="Run a controller against a simulated stage (default the embedded PEA: 2 nm noise and "
+                    "quantisation) "
+                    "tracking a reference; print RMSE and MAE (in µm on the line, in metres with --json).")
     p.add_argument("--algorithm", choices=ALGORITHMS, default="dppc")
     p.add_argument("--reference", default="sine:10",
                    help="step, ramp, step+ramp, sine:F[:A_um], c1, c2, c3, case3 (default sine:10)")

@@ -150,3 +150,15 @@ def test_a_report_directory_is_judged_before_the_diagnosis(tmp_path, capsys):
     (tmp_path / "f.yaml").write_text("x")
     assert main(["diagnose", str(tmp_path / "r.csv"), "--quiet", "--report", str(tmp_path / "f.yaml")]) == 2
     assert "is a file, not a directory" in _err(capsys)
+
+
+def test_simulate_refuses_an_input_with_a_gap_in_its_time_stamps(tmp_path, capsys):
+    """5 lost samples (or 100 s) in an input ran through silently: the per-sample model stepped across them."""
+    t, u, y = _data(1200)
+    write_csv(tmp_path / "r.csv", {"t": t, "u": u, "y": y})
+    assert main(["fit", str(tmp_path / "r.csv"), "--quiet", "--out", str(tmp_path / "p.yaml")]) == 0
+    keep = np.r_[0:600, 606:1200]
+    write_csv(tmp_path / "gap.csv", {"t": t[keep], "u": u[keep]})
+    assert main(["simulate", "--params", str(tmp_path / "p.yaml"), "--input", str(tmp_path / "gap.csv"),
+                 "--out", str(tmp_path / "y.csv")]) == 2
+    assert "have a gap of" in _err(capsys) and not (tmp_path / "y.csv").exists()

@@ -74,11 +74,22 @@ def _read_columns(path: Path, columns: tuple[str, ...], units: tuple[str, ...] |
         hint = (" (name the columns with --columns and their units with --units)"
                 if tuple(columns) == tuple(quantities) else "")
         raise DataError(f"{path}: column(s) {', '.join(missing)} not in the header {','.join(header)}{hint}")
+    if units:  # a unit the column's own name contradicts (y_um read as nm: 1000x off, silently)
+        for q, c, un in zip(quantities, columns, units):
+            named = _suffix_unit(q, c)
+            if "_" in c and c.rsplit("_", 1)[-1] in UNITS[q] and UNITS[q][named] != _unit_factor(q, un):
+                raise DataError(f"{path}: column {c} says {named} but --units gives {un}; rename the column or "
+                                "drop --units (the suffix is read when --units is not given)")
     us = units or tuple(_suffix_unit(q, c) for q, c in zip(quantities, columns))
     factors = np.array([_unit_factor(q, un) for q, un in zip(quantities, us)])
     idx = [header.index(c) for c in columns]
     if len(lines) < 2 or not any(ln.strip() for ln in lines[1:]):
         raise DataError(f"{path}: header only, no data rows")
+    width = len(header)
+    for k, ln in enumerate(lines[1:], start=2):  # a row with a field too many was cut silently (one too few is
+        if ln.strip() and ln.count(",") + 1 > width:  # refused by genfromtxt)
+            raise DataError(f"{path}: malformed rows (line {k} has {ln.count(',') + 1} fields, the header "
+                            f"{width})")
     try:
         data = np.genfromtxt(io.StringIO(text), delimiter=",", skip_header=1, usecols=idx, dtype=np.float64,
                              invalid_raise=True, encoding="utf-8-sig")
