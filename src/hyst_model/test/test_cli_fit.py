@@ -162,3 +162,15 @@ def test_simulate_refuses_an_input_with_a_gap_in_its_time_stamps(tmp_path, capsy
     assert main(["simulate", "--params", str(tmp_path / "p.yaml"), "--input", str(tmp_path / "gap.csv"),
                  "--out", str(tmp_path / "y.csv")]) == 2
     assert "have a gap of" in _err(capsys) and not (tmp_path / "y.csv").exists()
+
+
+@pytest.mark.parametrize("argv, why", [
+    (["--train", "0:0.2", "--split", "tail"], "--train T0:T1 sets the split itself"),
+    (["--method", "lsq", "--seed", "5"], "--seed applies to --method epso only"),
+    (["--val-fraction", "1"], "--val-fraction must be in [0, 1)"),  # block_mask's own words before
+])
+def test_options_that_would_be_ignored_are_refused(tmp_path, capsys, argv, why):
+    t, u, y = _data(600)
+    write_csv(tmp_path / "r.csv", {"t": t, "u": u, "y": y})
+    assert main(["fit", str(tmp_path / "r.csv"), "--quiet", *argv]) == 2
+    assert why in _err(capsys)

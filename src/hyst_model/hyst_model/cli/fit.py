@@ -145,6 +145,7 @@ def run(args) -> int:
     for path in args.effect_module:
         load_effect_module(path)
     effects = [e.strip() for e in args.effects.split(",") if e.strip()]
+    _check_options(args)
     split = parse_split(args.train, args.val_fraction, args.split)
     user_cfg = parse_config(args.config, effects)
     rec = load_checked(args)
@@ -212,6 +213,17 @@ def run(args) -> int:
     else:
         print(_table(res, rec, out, adm))
     return 0
+
+
+def _check_options(args) -> None:
+    """Options that would be silently ignored are refused, as ``--iterations`` without EPSO always was."""
+    if not 0.0 <= args.val_fraction < 1.0:
+        raise DataError(f"--val-fraction must be in [0, 1) (0 = no hold-out), got {args.val_fraction:g}")
+    if args.train and (args.split != "blocks" or args.val_fraction != 0.25):
+        raise DataError("--train T0:T1 sets the split itself (train on T0..T1, validate after T1); drop --split "
+                        "and --val-fraction")
+    if args.seed is not None and not METHODS[args.method].seeded:
+        raise DataError(f"--seed applies to --method epso only ({args.method} is deterministic)")
 
 
 def _table(res, rec, out, adm) -> str:

@@ -83,6 +83,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"hyst {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `hyst fit ... | head`: the reader has what it wanted; no traceback, no retry
+        import os
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # Python flushes stdout at exit: into the void, not the pipe
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover
