@@ -89,6 +89,8 @@ def parse_effect_config(items: Sequence[str], effects: Sequence[str], *,
         if known is not None and key.split(".", 1)[1] not in known:
             raise DataError(f"{opt} {key}: {name} has no setting {key.split('.', 1)[1]!r}; its settings are "
                             f"{', '.join(sorted(known)) or 'none'}")
+        if key in out:  # the last one won silently
+            raise DataError(f"{opt} {key} is given twice ({out[key]!r} and {value!r}); keep one")
         try:
             out[key] = float(value)
         except ValueError:

@@ -174,3 +174,14 @@ def test_options_that_would_be_ignored_are_refused(tmp_path, capsys, argv, why):
     write_csv(tmp_path / "r.csv", {"t": t, "u": u, "y": y})
     assert main(["fit", str(tmp_path / "r.csv"), "--quiet", *argv]) == 2
     assert why in _err(capsys)
+
+
+@pytest.mark.parametrize("argv, why", [
+    (["--effects", "delay", "--config", "delay.side=output", "--config", "delay.side=input"], "given twice"),
+    (["--effects", "dynamics", "--config", "dynamics.substeps=2.5"], "a whole number"),  # ran and saved as 2
+])
+def test_an_effect_setting_given_twice_or_not_whole_is_refused(tmp_path, capsys, argv, why):
+    t, u, y = _data(600)
+    write_csv(tmp_path / "r.csv", {"t": t, "u": u, "y": y})
+    assert main(["fit", str(tmp_path / "r.csv"), "--quiet", *argv]) == 2
+    assert why in _err(capsys)

@@ -134,13 +134,15 @@ class DynamicsEffect(Effect):
         self.structure = str(cfg.get("dynamics.structure", "series"))
         if self.structure not in STRUCTURES:
             raise EffectError(f"dynamics.structure must be one of {', '.join(STRUCTURES)}, not {self.structure!r}")
-        self.substeps = int(float(cfg.get("dynamics.substeps", 10)))
-        if not 1 <= self.substeps <= 1000:
-            raise EffectError("dynamics.substeps must be between 1 and 1000")
+        sub = float(cfg.get("dynamics.substeps", 10))
+        if sub != int(sub) or not 1 <= sub <= 1000:  # 2.5 ran (and was saved) as 2
+            raise EffectError(f"dynamics.substeps must be a whole number between 1 and 1000, not {sub:g}")
+        self.substeps = int(sub)
         self.hold = str(cfg.get("dynamics.hold", "zoh"))
         if self.hold not in HOLDS:
             raise EffectError(f"dynamics.hold must be one of {', '.join(HOLDS)}, not {self.hold!r}")
-        self.modes = int(float(cfg.get("dynamics.modes", 1)))
+        modes = float(cfg.get("dynamics.modes", 1))
+        self.modes = int(modes) if modes in (1.0, 2.0) else 0
         if self.modes not in (1, 2):
             raise EffectError(f"dynamics.modes must be 1 or 2, not {cfg.get('dynamics.modes')!r}")
         if self.modes == 2 and self.structure != "series":
