@@ -237,6 +237,10 @@ def _resonant(rate: float, seed: int, fn: float, zeta: float, base: PlantConfig 
 def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.seconds) and 0 < args.seconds <= 600):
         raise ConfigError("--seconds must be in (0, 600]")
+    if args.initial != "model" and args.algorithm != "dmrac":  # ignored silently before, as --gain never was
+        raise ConfigError(f"--initial sets DMRAC's initial estimates; --algorithm {args.algorithm} has none")
+    if args.thesis_rate and args.algorithm not in ("dppc", "dmrac"):
+        raise ConfigError(f"--thesis-rate applies to DPPC and DMRAC (their reference rate), not {args.algorithm}")
     spec = _read_params(args.params) if args.params else None
     if spec is not None and args.no_effects:
         spec.effects = []

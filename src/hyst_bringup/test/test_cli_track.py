@@ -34,7 +34,9 @@ def test_gain_overrides_reproduce_table_5_6_trend_from_cs3(capsys):
 @pytest.mark.parametrize("argv", [["track", "--reference", "sine"], ["track", "--seconds", "-1"],
                                   ["track", "--gain", "chi=2"], ["track", "--gain", "nope=1"],
                                   ["track", "--algorithm", "open_loop", "--gain", "ki=1"],
-                                  ["track", "--mismatch", "3"], ["track", "--algorithm", "dmrac", "--initial", "x"]])
+                                  ["track", "--mismatch", "3"], ["track", "--algorithm", "dmrac", "--initial", "x"],
+                                  ["track", "--algorithm", "pid", "--initial", "cs1"],  # ignored silently before
+                                  ["track", "--algorithm", "pid", "--thesis-rate"]])
 def test_bad_input_is_one_line_and_exit_2(argv, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
