@@ -60,3 +60,11 @@ def test_failing_user_effect_is_one_line_naming_it(tmp_path, capsys, tag):
         obj = json.loads(captured.out)
         ev = [c["evidence"] for c in obj["candidates"] if c["effect"] == f"flaky_{tag}"][0]
         assert f"user effect 'flaky_{tag}'" in ev and "failed in output()" in ev, ev
+
+
+def test_an_effect_module_that_exits_at_import_is_an_error_not_a_silent_exit_0(tmp_path, capsys):
+    mod = tmp_path / "quitter.py"
+    mod.write_text("import sys\nsys.exit(0)\n")
+    rc = main(["fit", str(_data(tmp_path)), "--effects", "hum", "--effect-module", str(mod), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "called sys.exit(0)" in err and "Traceback" not in err

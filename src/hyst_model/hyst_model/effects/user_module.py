@@ -53,6 +53,9 @@ def load_effect_module(path: str | Path) -> list[str]:
     except Exception as err:  # anything a user file raises at import is "broken module"
         sys.modules.pop(modname, None)
         raise EffectError(f"effect module {p}: import failed: {type(err).__name__}: {err}") from err
+    except SystemExit as err:  # sys.exit() at import ended hyst fit with exit 0 and no output at all
+        sys.modules.pop(modname, None)
+        raise EffectError(f"effect module {p}: import failed: it called sys.exit({err.code!r})") from err
     classes = [obj for obj in vars(mod).values()
                if isinstance(obj, type) and issubclass(obj, Effect) and obj is not Effect
                and obj.__module__ == modname]
