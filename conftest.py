@@ -40,3 +40,17 @@ def _effect_registry_restored():
         builtin = {n: c for n, c in compose.EFFECTS.items() if c.__module__.startswith("hyst_model.effects.")}
         compose.EFFECTS.clear()
         compose.EFFECTS.update(builtin)
+
+
+@pytest.fixture
+def ten_volt_stage(tmp_path) -> str:
+    """A params file of a ±10 V stage (the GMA loop shape on 1 V per model unit), identified at 1 kHz: another
+    stage for ``profile custom`` (sim, driver, controller)."""
+    from hyst_model.core import stage_model
+
+    m = stage_model("gma").replace(u_scale=1.0)
+    body = "".join(f"      {k}: {v!r}\n" for k, v in m.to_dict().items())
+    p = tmp_path / "stage10.yaml"
+    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n" + body +
+                 f"      u_scale: {m.u_scale!r}\n      y_scale: {m.y_scale!r}\n      dt: 0.001\n")
+    return str(p)

@@ -10,31 +10,20 @@ from hyst_bringup.emulator import build_device
 from hyst_common.errors import ConfigError
 
 
-def _ten_volt_stage(tmp_path) -> str:
-    """A params file of a ±10 V stage (the GMA loop shape on 1 V per model unit), identified at 1 kHz."""
-    from hyst_model.core import stage_model
 
-    m = stage_model("gma").replace(u_scale=1.0)
-    body = "".join(f"      {k}: {v!r}\n" for k, v in m.to_dict().items())
-    p = tmp_path / "stage10.yaml"
-    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n" + body +
-                 f"      u_scale: {m.u_scale!r}\n      y_scale: {m.y_scale!r}\n      dt: 0.001\n")
-    return str(p)
-
-
-def test_build_device_runs_a_custom_stage_on_its_own_range(tmp_path):
-    dev = build_device("custom", 1000.0, params_file=_ten_volt_stage(tmp_path), v_range=(-10.0, 10.0))
+def test_build_device_runs_a_custom_stage_on_its_own_range(ten_volt_stage):
+    dev = build_device("custom", 1000.0, params_file=ten_volt_stage, v_range=(-10.0, 10.0))
     assert dev.v_range == (-10.0, 10.0)
     with pytest.raises(ConfigError, match="needs --params-file"):
         build_device("custom", 1000.0, v_range=(-10.0, 10.0))
     with pytest.raises(ConfigError, match="needs --v-min and --v-max"):
-        build_device("custom", 1000.0, params_file=_ten_volt_stage(tmp_path), v_range=(None, 10.0))
+        build_device("custom", 1000.0, params_file=ten_volt_stage, v_range=(None, 10.0))
     with pytest.raises(ConfigError, match="has its own"):
         build_device("pea", 1000.0, v_range=(0.0, 100.0))
 
 
 @pytest.mark.ros
-def test_the_driver_sends_a_custom_amplifiers_range_and_clips_beyond_it(tmp_path):
+def test_the_driver_sends_a_custom_amplifiers_range_and_clips_beyond_it(ten_volt_stage):
     """9 V is applied as sent (beyond the GMA's ±5 V: the pea/gma profiles' ranges no longer bound the rig), 20 V
     is clipped to the amplifier's 10 V; a range beyond ±1 kV or without its ends is refused at start."""
     rclpy = pytest.importorskip("rclpy")
@@ -45,7 +34,7 @@ def test_the_driver_sends_a_custom_amplifiers_range_and_clips_beyond_it(tmp_path
     from hyst_driver.driver_node import DriverNode
     from hyst_driver.emulator import PtyEmulator
 
-    emu = PtyEmulator(build_device("custom", 1000.0, params_file=_ten_volt_stage(tmp_path),
+    emu = PtyEmulator(build_device("custom", 1000.0, params_file=ten_volt_stage,
                                    v_range=(-10.0, 10.0))).start()
     ctx = rclpy.Context()
     rclpy.init(context=ctx)

@@ -297,22 +297,11 @@ def test_pid_defaults_keep_the_peas_loop_gain_on_the_start_up_model(harness):
     assert mine.get_parameter("pid.kp").value == 123456.0
 
 
-def _ten_volt_stage(tmp_path) -> str:
-    """A params file of a ±10 V stage (the GMA loop shape on 1 V per model unit), identified at 1 kHz."""
-    from hyst_model.core import stage_model
 
-    m = stage_model("gma").replace(u_scale=1.0)
-    body = "".join(f"      {k}: {v!r}\n" for k, v in m.to_dict().items())
-    p = tmp_path / "stage10.yaml"
-    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n" + body +
-                 f"      u_scale: {m.u_scale!r}\n      y_scale: {m.y_scale!r}\n      dt: 0.001\n")
-    return str(p)
-
-
-def test_a_custom_stage_runs_on_its_own_range_model_and_stroke(harness, tmp_path):
+def test_a_custom_stage_runs_on_its_own_range_model_and_stroke(harness, ten_volt_stage):
     """profile custom: a ±10 V amplifier (beyond the ±200 V static range's GMA/PEA defaults) with the stage model of
     its params file; the limits, the watchdog's rest voltage and the internal reference are the stage's."""
-    node, peer, ex, pub, got = harness("--params-file", _ten_volt_stage(tmp_path), "-p", "profile:=custom",
+    node, peer, ex, pub, got = harness("--params-file", ten_volt_stage, "-p", "profile:=custom",
                                        "-p", "v_min:=-10.0", "-p", "v_max:=10.0", "-p", "reference:=sine:5")
     s = node._settings
     assert (s.limits.v_min, s.limits.v_max, s.limits.v_safe, s.limits.slew_max) == (-10.0, 10.0, 0.0, 2e4)
@@ -332,9 +321,10 @@ def test_a_custom_stage_runs_on_its_own_range_model_and_stroke(harness, tmp_path
     (("-p", "profile:=custom", "--params-file", "STAGE"), "needs v_min and v_max"),
     (("-p", "profile:=pae",), "unknown profile 'pae'"),
 ])
-def test_a_custom_stage_without_its_model_or_range_and_an_unknown_profile_are_refused(harness, tmp_path, cli, why):
+def test_a_custom_stage_without_its_model_or_range_and_an_unknown_profile_are_refused(harness, ten_volt_stage, cli,
+                                                                                       why):
     """An unknown profile name ran the PEA's limits without a word; custom without its range or model is refused."""
-    cli = tuple(_ten_volt_stage(tmp_path) if a == "STAGE" else a for a in cli)
+    cli = tuple(ten_volt_stage if a == "STAGE" else a for a in cli)
     with pytest.raises(Exception, match=why):
         harness(*cli)
 

@@ -345,22 +345,11 @@ def test_end_stop_fault_names_its_samples_and_clears_when_the_stage_is_free(rig_
     assert "end stop" not in ok.message and int(_values(ok)["end_stop_samples"]) >= n_stop
 
 
-def _ten_volt_stage(tmp_path) -> str:
-    """A params file of a ±10 V stage (the GMA loop shape on 1 V per model unit), identified at 1 kHz."""
-    from hyst_model.core import stage_model
 
-    m = stage_model("gma").replace(u_scale=1.0)
-    body = "".join(f"      {k}: {v!r}\n" for k, v in m.to_dict().items())
-    p = tmp_path / "stage10.yaml"
-    p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n" + body +
-                 f"      u_scale: {m.u_scale!r}\n      y_scale: {m.y_scale!r}\n      dt: 0.001\n")
-    return str(p)
-
-
-def test_a_custom_stage_runs_its_own_range_and_equals_the_offline_plant(rig_factory, tmp_path):
+def test_a_custom_stage_runs_its_own_range_and_equals_the_offline_plant(rig_factory, ten_volt_stage):
     """profile custom: a ±10 V stage from its params file; ±9 V applied as sent (beyond the GMA's ±5 V), 20 V
     clipped to its 10 V, bit for bit the offline plant."""
-    rig = rig_factory(mode="lockstep", profile="custom", params_file=_ten_volt_stage(tmp_path), v_min=-10.0,
+    rig = rig_factory(mode="lockstep", profile="custom", params_file=ten_volt_stage, v_min=-10.0,
                       v_max=10.0, seed=3)
     assert rig.spin_until(lambda: len(rig.states) >= 1), "no initial state in lockstep"
     assert rig.node._settings.v_safe == 0.0 and rig.node._settings.slew_max == 20.0 / 1e-3
@@ -382,8 +371,8 @@ def test_a_custom_stage_runs_its_own_range_and_equals_the_offline_plant(rig_fact
     (dict(profile="custom", v_min=-10.0, v_max=10.0), "needs params_file"),
     (dict(profile="custom", params_file="STAGE"), "needs v_min and v_max"),
 ])
-def test_a_custom_stage_without_its_model_or_range_is_refused_with_the_reason(tmp_path, params, why):
-    params = {k: (_ten_volt_stage(tmp_path) if v == "STAGE" else v) for k, v in params.items()}
+def test_a_custom_stage_without_its_model_or_range_is_refused_with_the_reason(ten_volt_stage, params, why):
+    params = {k: (ten_volt_stage if v == "STAGE" else v) for k, v in params.items()}
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     try:
