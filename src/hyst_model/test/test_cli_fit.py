@@ -168,6 +168,7 @@ def test_simulate_refuses_an_input_with_a_gap_in_its_time_stamps(tmp_path, capsy
     (["--train", "0:0.2", "--split", "tail"], "--train T0:T1 sets the split itself"),
     (["--method", "lsq", "--seed", "5"], "--seed applies to --method epso only"),
     (["--val-fraction", "1"], "--val-fraction must be in [0, 1)"),  # block_mask's own words before
+    (["--topic", "/nope"], "--topic and --salvage apply to bags"),
 ])
 def test_options_that_would_be_ignored_are_refused(tmp_path, capsys, argv, why):
     t, u, y = _data(600)

@@ -41,4 +41,6 @@ def load_record(path: str | Path, *, topic: str = STATE_TOPIC, columns=None, uni
         if columns is not None or units is not None:
             raise DataError(f"{p}: --columns/--units apply to CSV files, not bags (bags are SI by contract)")
         return read_state_bag(p, topic, salvage=salvage)
+    if topic != STATE_TOPIC or salvage:  # ignored silently before, as --columns on a bag never was
+        raise DataError(f"{p}: --topic and --salvage apply to bags, not CSV files (name CSV columns with --columns)")
     return read_csv(p, columns, units)
