@@ -132,12 +132,18 @@ def _csv(tmp_path, n):
     (["--effects", "creep,wobble"], "unknown effect 'wobble'"),
     (["--effects", "rate"], "already part of the mbw base"),
     (["--effects", "creep,creep"], "lists an effect twice"),
-    (["--jobs", "0"], "--jobs must be at least 1"),
 ])
 def test_bad_effect_choices_exit_2_with_one_line(tmp_path, capsys, extra, message):
     rc = main(["diagnose", str(_csv(tmp_path, 3000)), "--quiet", *extra])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and message in err[0]
+
+
+def test_jobs_below_one_is_refused_by_the_parser(tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["diagnose", str(_csv(tmp_path, 3000)), "--quiet", "--jobs", "0"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "--jobs: needs a whole number >= 1" in err and "Traceback" not in err
 
 
 def test_too_little_data_for_validation(tmp_path, capsys):

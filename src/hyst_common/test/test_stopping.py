@@ -124,8 +124,10 @@ def test_a_sigint_while_a_hyst_executable_is_still_importing_is_one_line_and_exi
     import subprocess
     import sys
 
-    code = ("import sys; sys.argv[0] = {name!r}; import os, signal, hyst_common, time; "
-            "os.kill(os.getpid(), signal.SIGINT); time.sleep(30)")
+    # the child first takes Python's default SIGINT handling, as a foreground process has it (a job started in
+    # the background, as CI may be, inherits SIGINT ignored)
+    code = ("import sys, signal; signal.signal(signal.SIGINT, signal.default_int_handler); sys.argv[0] = {name!r}; "
+            "import os, hyst_common, time; os.kill(os.getpid(), signal.SIGINT); time.sleep(30)")
     r = subprocess.run([sys.executable, "-c", code.format(name="/x/bin/hyst_controller_node")],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "interrupted while starting" in r.stderr and "Traceback" not in r.stderr, r.stderr
