@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
            "-p", f"hyst_sim:profile:={args.profile}", "-p", f"hyst_controller:profile:={args.profile}"]
     if args.profile != "pea":  # the sine sits on this stage's rest stroke as it sits on the PEA's (the controller
         m, lim = stage_model(args.profile), get_profile(args.profile)  # places its own spec alike, lockstep)
-        ref = parse_reference(f"sine:{args.frequency}", stroke=(m.rest_output(lim.v_min), m.rest_output(lim.v_max)))
+        ref = parse_reference(f"sine:{args.frequency}", stroke=m.rest_range(lim.v_min, lim.v_max))
         ros += ["-p", f"hyst_reference:offset:={ref.offset!r}", "-p", f"hyst_reference:amplitude:={ref.amplitude!r}"]
     if args.lockstep:
         ros += ["-p", "hyst_sim:mode:=lockstep", "-p", f"hyst_controller:reference:=sine:{args.frequency}",

@@ -131,20 +131,14 @@ def model_divergence(algorithm: str, model: MBWParams, comp: Compensation | None
             "the predictors would refuse it; refit on a record with steps across the range")
 
 
-def _stroke(model: MBWParams, limits: CommandLimits) -> tuple[float, float] | None:
-    """The model's rest displacement at the command limits (m), None where it has no finite increasing one."""
-    lo, hi = model.rest_output(limits.v_min), model.rest_output(limits.v_max)
-    return (lo, hi) if math.isfinite(lo) and math.isfinite(hi) and hi > lo else None
-
-
-def _reference(spec: str, profile: str, model: MBWParams, limits: CommandLimits) -> Reference | None:
-    """The internal reference of a spec: on the PEA's stroke as documented, on the model's own stroke (its rest
+def _reference(spec: str, profile: str, stroke: tuple[float, float] | None,
+               limits: CommandLimits) -> Reference | None:
+    """The internal reference of a spec: on the PEA's stroke as documented, on the model's own ``stroke`` (its rest
     displacement at ``v_min`` and ``v_max``) for any other profile — the GMA's ±20 µm holds no 5–25 µm sine."""
     if not spec:
         return None
-    if profile.strip().lower() == "pea":
+    if profile == "pea":
         return parse_reference(spec)
-    stroke = _stroke(model, limits)
     if stroke is None:
         raise ControlError(f"reference {spec!r}: the model has no finite, increasing rest displacement over "
                            f"v_min..v_max ({limits.v_min:g}..{limits.v_max:g} V) to place it on; check the model")
@@ -189,6 +183,7 @@ def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> Co
     comp = plan_compensation(model, effects, dict(evals), dict(evals), 1.0 / rate)
     limits = CommandLimits(f(get("v_min")), f(get("v_max")), f(get("slew_max")), f(get("v_safe")))
     divergence = model_divergence(alg, model, comp, limits, 1.0 / rate)  # ControlError: refused
+    stroke = model.rest_range(limits.v_min, limits.v_max)  # the reach, and the plausible readings
     # checked as the compensation will run it (a mode it inverts is left only as a model error)
     res = identified_resonance(effects, dict(evals), comp)
     notch = get("stability.notch")
@@ -200,8 +195,8 @@ def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> Co
         algorithm=alg, rate=rate, limits=limits,
         watchdog_periods=int(get("watchdog_periods")), state_decimation=int(get("state_decimation")),
         dmrac_initial=init, model=model,
-        reference=_reference(str(get("reference")), str(get("profile")), model, limits), stability=stab,
+        reference=_reference(str(get("reference")), profile, stroke, limits), stability=stab,
         effects=effects, effect_values=evals, gain_sets=tuple(gains.items()), divergence=divergence,
-        stroke=_stroke(model, limits), safe_ramp_rate=f(get("safe_ramp_rate")))
+        stroke=stroke, safe_ramp_rate=f(get("safe_ramp_rate")))
     make_controller(alg, model, 1.0 / s.rate, s.limits, s.gains(alg), init, s.compensation())  # checks all
     return s

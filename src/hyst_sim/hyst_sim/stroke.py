@@ -1,7 +1,6 @@
 """The stage's stroke from its MBW model, and the start-up check that a model is bounded (split from plant.py)."""
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -20,11 +19,11 @@ def rest_stroke(mbw: MBWParams, v_min: float, v_max: float) -> tuple[float, floa
     ConfigError
         The model has no finite increasing rest displacement over the range.
     """
-    lo, hi = mbw.rest_output(v_min), mbw.rest_output(v_max)
-    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+    stroke = mbw.rest_range(v_min, v_max)
+    if stroke is None:
         raise ConfigError("the MBW model has no finite, increasing rest displacement over [v_min, v_max]; "
                           "check the params file")
-    return lo, hi
+    return stroke
 
 
 def check_bounded(cfg, p: np.ndarray, stroke: tuple[float, float]) -> None:

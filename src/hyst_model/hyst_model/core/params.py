@@ -6,6 +6,8 @@ Table 3.1 verbatim for the faithful EPSO.
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
 
@@ -107,6 +109,12 @@ class MBWParams:
         """Displacement (m) with ``v`` (V) held for a long time: the rest state the simulation starts from (nan where
         the recursion has no rest state there)."""
         return float(self.y_scale * mbw_rest_state(self.vector, float(v) / self.u_scale) + self.offset)
+
+    def rest_range(self, v_min: float, v_max: float) -> tuple[float, float] | None:
+        """``(x_lo, x_hi)``: the rest displacement (m) at ``v_min`` and ``v_max`` — the stage's travel over that
+        range — or None where the model has no finite, increasing one (a bad or diverging model)."""
+        lo, hi = self.rest_output(v_min), self.rest_output(v_max)
+        return (lo, hi) if math.isfinite(lo) and math.isfinite(hi) and hi > lo else None
 
     def simulate(self, u: np.ndarray, *, from_rest: bool = True) -> np.ndarray:
         """Simulate in SI units: input volts, output metres.
