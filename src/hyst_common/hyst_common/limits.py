@@ -27,10 +27,18 @@ from dataclasses import dataclass
 
 from .errors import ConfigError
 
-__all__ = ["CommandLimits", "limit_step", "LIMIT_RANGE", "LIMIT_SLEW", "LIMIT_NONFINITE"]
+__all__ = ["CommandLimits", "limit_step", "beyond_span", "LIMIT_RANGE", "LIMIT_SLEW", "LIMIT_NONFINITE"]
 
 #: Flag bits returned by :func:`limit_step`: range clipped, slew limited, NaN replaced by the previous value.
 LIMIT_RANGE, LIMIT_SLEW, LIMIT_NONFINITE = 1, 2, 4
+
+
+def beyond_span(v: float, v_min: float, v_max: float) -> bool:
+    """True for a command more than one range span outside ``[v_min, v_max]`` (and for NaN): a corrupted or
+    unit-confused request (150000 meant as mV) that the driver and the sim reject and hold, instead of clipping it
+    to full scale as they clip one just outside."""
+    span = v_max - v_min
+    return not (v_min - span <= v <= v_max + span)
 
 
 def limit_step(v, v_min, v_max, v_prev, max_step):

@@ -44,7 +44,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from functools import cached_property
 
-from hyst_common.limits import LIMIT_SLEW, limit_step
+from hyst_common.limits import LIMIT_SLEW, beyond_span, limit_step
 
 from .errors import ConfigError
 
@@ -122,8 +122,7 @@ class Limits:
 
     def is_huge(self, v: float) -> bool:
         """True for requests more than one window span outside the window (rejected, not clipped)."""
-        span = self.v_max - self.v_min
-        return not (self.v_min - span <= v <= self.v_max + span)
+        return beyond_span(v, self.v_min, self.v_max)
 
 
 @dataclass

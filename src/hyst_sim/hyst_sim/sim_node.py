@@ -50,6 +50,7 @@ from rclpy._rclpy_pybind11 import RCLError  # what a failed publish raises; rclp
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
+from hyst_common.limits import beyond_span
 from hyst_common.node import KEEP_ALL_RELIABLE, AtomicParametersNode, fp_range, int_range, run_node
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
@@ -237,8 +238,7 @@ class SimNode(AtomicParametersNode):
     def _sample(self, v_cmd: float, stamp: Time) -> None:
         with self._lock:
             s = self._settings
-            span = s.v_max - s.v_min
-            huge = math.isfinite(v_cmd) and not s.v_min - span <= v_cmd <= s.v_max + span
+            huge = math.isfinite(v_cmd) and beyond_span(v_cmd, s.v_min, s.v_max)  # NaN: the plant holds it
             if huge:  # as the driver's limiter: a corrupt or unit-confused command holds, it is not full scale
                 v_huge, v_cmd = v_cmd, self._plant.u_applied
             try:
