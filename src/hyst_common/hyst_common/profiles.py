@@ -25,7 +25,8 @@ from .errors import ConfigError
 from .limits import CommandLimits
 
 __all__ = ["Profile", "PEA", "GMA", "PROFILES", "get_profile", "V_SPAN", "PEA_LIMITS", "GMA_LIMITS",
-           "CUSTOM_V_MAX", "CUSTOM_SWING_TIME", "custom_limits", "rest_voltage", "custom_slew", "custom_base"]
+           "CUSTOM_V_MAX", "CUSTOM_SWING_TIME", "custom_limits", "rest_voltage", "custom_slew", "custom_base",
+           "check_range"]
 
 
 @dataclass(frozen=True)
@@ -154,3 +155,26 @@ def custom_limits(v_min: float, v_max: float, slew_max: float | None = None) -> 
                           f"got {lo:g}..{hi:g} V")
     slew = custom_slew(lo, hi) if slew_max is None else float(slew_max)
     return CommandLimits(v_min=lo, v_max=hi, slew_max=slew, v_safe=rest_voltage(lo, hi))
+
+
+def check_range(profile: str, v_min: float, v_max: float, slew_max: float | None = None) -> None:
+    """Refuse ``[v_min, v_max]`` where the profile's amplifier has no such range: inside the profile's for ``pea``
+    and ``gma``, a finite range within ±:data:`CUSTOM_V_MAX` for ``custom`` — the one check of the driver, the
+    sim and the controller.
+
+    Raises
+    ------
+    ConfigError
+        With the reason (an unknown profile name too).
+    """
+    name = str(profile).strip().lower()
+    if name == "custom":
+        try:
+            custom_limits(v_min, v_max, slew_max)
+        except ConfigError as err:
+            raise ConfigError(f"profile custom needs v_min and v_max, the amplifier's range: {err}") from err
+        return
+    prof = get_profile(name)
+    if not prof.v_min <= v_min < v_max <= prof.v_max:
+        raise ConfigError(f"need {prof.v_min:g} <= v_min < v_max <= {prof.v_max:g} V for profile {prof.name} (the "
+                          f"amplifier's range), got v_min={v_min:g}, v_max={v_max:g}")

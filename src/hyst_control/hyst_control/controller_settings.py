@@ -10,7 +10,7 @@ from functools import lru_cache
 from typing import Any
 
 from hyst_common.limits import CommandLimits
-from hyst_common.profiles import get_profile
+from hyst_common.profiles import check_range
 from hyst_model.core import PARAM_NAMES, MBWParams, pea_default, stage_model
 from hyst_model.core.bounded import mbw_bounded
 
@@ -164,12 +164,7 @@ def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> Co
         raise ControlError(f"the model was identified at dt = {mdt:g} s but rate = {rate:g} Hz: the MBW recursion "
                            f"is per sample, so set rate:={1.0 / mdt:g} (or refit the model at this rate)")
     profile = str(get("profile")).strip().lower()
-    lo_v, hi_v = f(get("v_min")), f(get("v_max"))
-    if profile != "custom":
-        prof = get_profile(profile)  # ConfigError for an unknown name
-        if not prof.v_min <= lo_v < hi_v <= prof.v_max:
-            raise ControlError(f"need {prof.v_min:g} <= v_min < v_max <= {prof.v_max:g} V for profile {profile} "
-                               f"(the amplifier's range), got v_min={lo_v:g}, v_max={hi_v:g}")
+    check_range(profile, f(get("v_min")), f(get("v_max")))  # ConfigError (a ValueError): refused with it
     init = str(get("dmrac.initial")).lower()
     if init != "model" and init not in TABLE53:
         raise ControlError("dmrac.initial must be model, cs0, cs1, cs2 or cs3")

@@ -25,7 +25,7 @@ from sensor_msgs.msg import JointState
 
 from hyst_common.errors import ConfigError as HystConfigError
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
-from hyst_common.profiles import CUSTOM_V_MAX, GMA, PEA, Profile, custom_limits, custom_slew, get_profile, rest_voltage
+from hyst_common.profiles import CUSTOM_V_MAX, GMA, PEA, Profile, check_range, custom_slew, get_profile, rest_voltage
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .adapter import PROTOCOLS, make_adapter
@@ -63,16 +63,10 @@ class DriverConfig:
                               "(without hardware: run hyst_emulator and use the path it prints)")
         if self.protocol not in PROTOCOLS:
             raise ConfigError(f"protocol {self.protocol!r} unknown; choose one of {', '.join(PROTOCOLS)}")
-        if self.profile.strip().lower() == "custom":  # another amplifier: its range is the user's
-            try:
-                custom_limits(self.v_min, self.v_max, self.slew_max)
-            except HystConfigError as err:  # hyst_common's: the driver's own is raised
-                raise ConfigError(f"profile custom needs v_min and v_max, the amplifier's range: {err}") from err
-        else:
-            prof = get_profile(self.profile)
-            if not prof.v_min <= self.v_min < self.v_max <= prof.v_max:
-                raise ConfigError(f"need {prof.v_min} <= v_min < v_max <= {prof.v_max} V for profile {prof.name}, "
-                                  f"got v_min={self.v_min}, v_max={self.v_max}")
+        try:
+            check_range(self.profile, self.v_min, self.v_max, self.slew_max)
+        except HystConfigError as err:  # hyst_common's: the driver's own is raised
+            raise ConfigError(str(err)) from err
         lim = self.limits()
         if lim.slew_max * lim.dt_max < 1e-6:
             raise ConfigError(f"slew_max {self.slew_max} V/s moves less than 1 uV per sample at {self.rate} Hz")

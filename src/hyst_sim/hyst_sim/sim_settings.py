@@ -7,7 +7,7 @@ from typing import Any
 from .errors import SimError
 from .plant import PlantConfig
 from hyst_common.errors import ConfigError
-from hyst_common.profiles import custom_base, custom_limits, get_profile
+from hyst_common.profiles import check_range, custom_base
 from .scenario import load_scenario
 
 __all__ = ["SimSettings", "plant_config"]
@@ -38,19 +38,13 @@ class SimSettings:
 
     def validate(self) -> None:
         """Raise :class:`SimError` with a reason for inconsistent values (ranges are checked by ROS)."""
-        if self.profile == "custom":  # another stage: its model and range are the user's
-            if not self.params_file:
-                raise SimError("profile custom needs params_file: the stage's model (hyst fit --out)")
-            try:
-                custom_limits(self.v_min, self.v_max, self.slew_max)
-            except ConfigError as err:
-                raise SimError(f"profile custom needs v_min and v_max, the stage amplifier's range: {err}") \
-                    from err
-        else:
-            prof = get_profile(self.profile)
-            if not prof.v_min <= self.v_min < self.v_max <= prof.v_max:
-                raise SimError(f"need {prof.v_min} <= v_min < v_max <= {prof.v_max} V for profile {prof.name!r}, "
-                               f"got v_min={self.v_min}, v_max={self.v_max} (set them in the same call as profile)")
+        if self.profile == "custom" and not self.params_file:  # another stage: its model and range are the user's
+            raise SimError("profile custom needs params_file: the stage's model (hyst fit --out)")
+        try:
+            check_range(self.profile, self.v_min, self.v_max, self.slew_max)
+        except ConfigError as err:
+            hint = "" if self.profile == "custom" else " (set them in the same call as profile)"
+            raise SimError(f"{err}{hint}") from err
         if not self.v_min <= self.v_safe <= self.v_max:
             raise SimError(f"v_safe = {self.v_safe} V must lie in [v_min, v_max] = [{self.v_min}, {self.v_max}] V")
         if self.mode not in ("realtime", "lockstep"):
