@@ -25,8 +25,8 @@ from .errors import ConfigError
 from .limits import CommandLimits
 
 __all__ = ["Profile", "PEA", "GMA", "PROFILES", "get_profile", "V_SPAN", "PEA_LIMITS", "GMA_LIMITS",
-           "CUSTOM_V_MAX", "CUSTOM_SWING_TIME", "custom_limits", "rest_voltage", "custom_slew", "custom_base",
-           "check_range"]
+           "CUSTOM_V_MAX", "CUSTOM_SWING_TIME", "custom_limits", "custom_range", "rest_voltage", "custom_slew",
+           "custom_base", "check_range"]
 
 
 @dataclass(frozen=True)
@@ -157,6 +157,20 @@ def custom_limits(v_min: float, v_max: float, slew_max: float | None = None) -> 
     return CommandLimits(v_min=lo, v_max=hi, slew_max=slew, v_safe=rest_voltage(lo, hi))
 
 
+def custom_range(v_min: float, v_max: float, slew_max: float | None = None) -> CommandLimits:
+    """:func:`custom_limits` for ``profile custom``, refused in the one wording the nodes and the sim share.
+
+    Raises
+    ------
+    ConfigError
+        ``profile custom needs v_min and v_max, the amplifier's range: ...``
+    """
+    try:
+        return custom_limits(v_min, v_max, slew_max)
+    except ConfigError as err:
+        raise ConfigError(f"profile custom needs v_min and v_max, the amplifier's range: {err}") from err
+
+
 def check_range(profile: str, v_min: float, v_max: float, slew_max: float | None = None) -> None:
     """Refuse ``[v_min, v_max]`` where the profile's amplifier has no such range: inside the profile's for ``pea``
     and ``gma``, a finite range within ±:data:`CUSTOM_V_MAX` for ``custom`` — the one check of the driver, the
@@ -169,10 +183,7 @@ def check_range(profile: str, v_min: float, v_max: float, slew_max: float | None
     """
     name = str(profile).strip().lower()
     if name == "custom":
-        try:
-            custom_limits(v_min, v_max, slew_max)
-        except ConfigError as err:
-            raise ConfigError(f"profile custom needs v_min and v_max, the amplifier's range: {err}") from err
+        custom_range(v_min, v_max, slew_max)
         return
     prof = get_profile(name)
     if not prof.v_min <= v_min < v_max <= prof.v_max:

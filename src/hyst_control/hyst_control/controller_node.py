@@ -33,7 +33,7 @@ from sensor_msgs.msg import JointState
 
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 from hyst_common.errors import ConfigError
-from hyst_common.profiles import CUSTOM_V_MAX, custom_base, custom_limits, get_profile
+from hyst_common.profiles import CUSTOM_V_MAX, custom_base, custom_range, get_profile
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from hyst_model.core import MBWParams
@@ -122,10 +122,9 @@ class ControllerNode(AtomicParametersNode):
             d(n, v, ParameterDescriptor(description=txt, floating_point_range=box))
         if lim is None:  # another stage: no default range, the user names the amplifier's
             try:
-                lim = custom_limits(self.get_parameter("v_min").value, self.get_parameter("v_max").value)
+                lim = custom_range(self.get_parameter("v_min").value, self.get_parameter("v_max").value)
             except ConfigError as err:
-                raise ControlError(f"profile custom needs v_min and v_max, the stage amplifier's range: {err}") \
-                    from err
+                raise ControlError(str(err)) from err
             if not any(k.startswith("model.") for k in self._parameter_overrides):
                 raise ControlError("profile custom needs the stage's model: --params-file P (hyst fit --out); the "
                                    "embedded models are the PEA's and the GMA's")

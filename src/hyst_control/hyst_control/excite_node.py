@@ -23,7 +23,7 @@ from sensor_msgs.msg import JointState
 
 from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
 from hyst_common.errors import ConfigError as CommonConfigError
-from hyst_common.profiles import CUSTOM_V_MAX, GMA_LIMITS, PEA_LIMITS, custom_limits
+from hyst_common.profiles import CUSTOM_V_MAX, GMA_LIMITS, PEA_LIMITS, custom_range
 
 from .errors import ControlError
 from .excitation import (DEFAULT_RATE, MAX_RATE, MIN_RATE, PARTS, Excitation, ExcitationSpec, build_excitation,
@@ -76,10 +76,9 @@ class ExciteNode(AtomicParametersNode):
             d("v_max", 0.0, ParameterDescriptor(description="highest command (V) of the stage's amplifier",
                                                 floating_point_range=fp_range(*box), **ro))
             try:
-                lim = custom_limits(self.get_parameter("v_min").value, self.get_parameter("v_max").value)
+                lim = custom_range(self.get_parameter("v_min").value, self.get_parameter("v_max").value)
             except CommonConfigError as err:
-                raise ControlError(f"profile custom needs v_min and v_max, the stage amplifier's range: {err}") \
-                    from err
+                raise ControlError(str(err)) from err
         else:
             lim = GMA_LIMITS if prof == "gma" else PEA_LIMITS
             d("v_min", lim.v_min, ParameterDescriptor(description="lowest command (V), inside the profile",
