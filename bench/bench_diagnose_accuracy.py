@@ -111,6 +111,21 @@ def _label_line(res: list[dict]) -> str:
         for f, (a, n) in sorted(got.items(), key=lambda kv: TRUTH_NAME.get(kv[0], kv[0])))
 
 
+#: The issue's condition for "never a bare none": the base model's validation error at least this many times the
+#: noise floor.
+BARE_NONE_FACTOR = 5.0
+
+
+def bare_none_line(res: list[dict]) -> str:
+    """The issue's own condition over every case, whatever its kind: a record whose base error is ≥
+    :data:`BARE_NONE_FACTOR` × the noise floor answered ``none`` with no unexplained remainder (a bare ``none``).
+    The ``outside`` band is stricter (it asks for the remainder reported even where a library effect was named)."""
+    big = [r for r in res if "error" not in r and r.get("base_over_noise", 0.0) >= BARE_NONE_FACTOR]
+    bare = [r["case"] for r in big if r["named"][0] == "none" and r.get("unexplained") is None]
+    return (f"base error ≥ {BARE_NONE_FACTOR:g}× the noise floor answered a bare none: {len(bare)} of {len(big)} such "
+            f"records" + (f" ({', '.join(bare[:5])}{', ...' if len(bare) > 5 else ''})" if bare else ""))
+
+
 def summarise(res: list[dict]) -> str:
     lines = []
     exp_names = sorted({e for r in res for e in r["expected"]})
@@ -179,6 +194,7 @@ def summarise(res: list[dict]) -> str:
                  f"(the record cannot exclude it), and an effect not in the truth on {und_wrong} others")
     lines.append(f"caution (the base does not carry over to the record's own hold-out) on {cautioned} cases, "
                  f"{wrong_with} of them answered wrong; {wrong_without} wrong answers without it")
+    lines.append(bare_none_line(res))
     label = _label_line(res)
     if label:
         lines.append(label)
