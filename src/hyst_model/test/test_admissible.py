@@ -29,6 +29,9 @@ def test_thesis_table_4_1_is_admissible_and_a_violation_is_named():
     b = check_admissible(m, th_bad)
     assert b.remark_4_1 is False and any(v.startswith("alpha2 = 0.01") for v in b.violations)
     assert "μ floored" in b.controllers
+    assert "refit with --admissible" in b.controllers  # the constrained fit is offered where Remark 4.1 fails
+    if a.remark_4_1:
+        assert "--admissible" not in a.controllers  # nothing to offer where the Remark holds
     lo, _ = m.bounds
     th_edge = th.copy()
     th_edge[m.names.index("psi2")] = lo[m.names.index("psi2")]
@@ -54,7 +57,9 @@ def test_a_model_that_diverges_within_its_record_range_is_reported():
     assert bad.bounded is False and not bad.clean
     assert "steps between its ends" in bad.divergence and bad.controllers.startswith("unstable off its record")
     assert check_admissible(m, th_bad).bounded is None
-    assert "--admissible" not in bad.controllers  # ψ ≥ 0 here: the constrained fit would not be the cure
+    # ψ ≥ 0 here: the divergence hint does not offer the constrained fit as its cure (Remark 4.1's verdict, after
+    # it, does offer it for α1 = 3, which violates the Remark)
+    assert "keeps the rate terms passive" not in bad.controllers
     th_neg = th.copy()
     th_neg[m.names.index("psi2")] = -1.0  # anti-damping rate term: runs away once the input moves fast
     neg = check_admissible(m, th_neg, record=(t, u, y))

@@ -109,7 +109,9 @@ def _check_parameters(model, theta, rel: float) -> Admissibility:
         verdict = "the controllers refuse this model: " + "; ".join(basic)
     elif bad:
         verdict = ("the controllers can run it, but with μ floored where it changes sign (Remark 4.1 violated): "
-                   "not the thesis's law; refit with more excitation or check the parameters on their bounds")
+                   "not the thesis's law; refit with --admissible (hyst fit or hyst diagnose: Remark 4.1 held by "
+                   "construction, with the free fit's error beside it), with more excitation, or check the "
+                   "parameters on their bounds")
     else:
         verdict = "the controllers can use it (Remark 4.1 holds: μ stays positive)"
     return Admissibility(not bad, bad, at, verdict)
