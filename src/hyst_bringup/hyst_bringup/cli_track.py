@@ -122,6 +122,8 @@ def _gains(args: argparse.Namespace, classes: dict, base=None):
         name, _, value = item.partition("=")
         if name not in names:
             raise ConfigError(f"--gain {item!r}: {args.algorithm} gains are {', '.join(names)}")
+        if name in kw:  # the last one won silently (hyst fit refuses a repeated --config alike)
+            raise ConfigError(f"--gain {name} given twice; give each gain once")
         try:
             kw[name] = value.lower() in ("1", "true", "yes") if names[name] in (bool, "bool") else float(value)
         except ValueError:
@@ -241,6 +243,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--initial sets DMRAC's initial estimates; --algorithm {args.algorithm} has none")
     if args.thesis_rate and args.algorithm not in ("dppc", "dmrac"):
         raise ConfigError(f"--thesis-rate applies to DPPC and DMRAC (their reference rate), not {args.algorithm}")
+    if args.no_effects and not args.params:  # ignored silently before, as --initial never was
+        raise ConfigError("--no-effects drops the effects of a --params model; without --params there are none")
     spec = _read_params(args.params) if args.params else None
     if spec is not None and args.no_effects:
         spec.effects = []
@@ -275,6 +279,9 @@ def run(args: argparse.Namespace) -> int:
         resonance = Resonance(fn, zeta)
     elif spec is not None:  # an identified resonance: the gains are checked against it, as the node does
         resonance = identified_resonance(spec.effects, spec.values, comp, spec.config)
+    if resonance is None and (args.stability != "derate" or not args.notch):
+        print("hyst track: note: --stability and --notch act on a resonance (--resonance, or a dynamics effect of "
+              "--params); there is none here, so they change nothing", file=sys.stderr)
     if resonance is not None:
         stab = guard(args.algorithm, gains if gains is not None or args.algorithm == "open_loop" else
                      make_controller(args.algorithm, model, 1.0 / args.rate).gains, model, 1.0 / args.rate,

@@ -80,13 +80,16 @@ def run(args: argparse.Namespace) -> int:
         raise LoopError("the demo schedule must total at most 40 s")
     if not (0 < args.frequency <= 100 and 100 <= args.rate <= 2000):
         raise LoopError("--frequency must be in (0, 100] Hz and --rate in [100, 2000] Hz")
-    args.bags.mkdir(parents=True, exist_ok=True)
+    if not 0 <= args.rt_priority <= 98:
+        raise LoopError("--rt-priority must be 0 (normal scheduling) or 1-98")
+    try:
+        args.bags.mkdir(parents=True, exist_ok=True)
+    except OSError as bad:  # a file of that name, a path under a file or /proc: one line, not a traceback
+        raise LoopError(f"--bags {args.bags}: cannot use it as the bag directory ({bad.strerror or bad})") from None
     bag = default_bag_path(args.bags, "demo")
     warm_up([a for a, _ in schedule], args.rate)  # compile before the timed loop (first run after setup)
     env = dict(os.environ)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    if not 0 <= args.rt_priority <= 98:
-        raise LoopError("--rt-priority must be 0 (normal scheduling) or 1-98")
     ros = ["--ros-args", "-p", f"rate:={args.rate}", "-p", "shape:=sine", "-p", f"frequency:={args.frequency}",
            # real-time scheduling as on a rig (hyst_common.runtime): with it PID's worst error in this demo fell
            # from 10-14 µm to 0.5-0.7 µm in most runs on the test machine (one run of five: 8.7 µm)
@@ -107,7 +110,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"hyst demo: {', '.join(f'{a} {d:g} s' for a, d in schedule)} at {args.rate:g} Hz on a "
           f"{args.frequency:g} Hz sine, {args.profile.upper()} stage; recording {bag}", flush=True)
     try:
-        out, err = loop.communicate(timeout=3 * seconds + 30)  # a segment may stretch (composed.SEGMENT_STRETCH)
+        # a segment may stretch (composed.SEGMENT_STRETCH); lockstep counts the stage's time, however slow
+        out, err = loop.communicate(timeout=(20 if args.lockstep else 3) * seconds + 30)
     except subprocess.TimeoutExpired:
         stop_processes([loop, rec])
         raise LoopError("the closed loop did not finish in time") from None

@@ -36,11 +36,20 @@ def test_gain_overrides_reproduce_table_5_6_trend_from_cs3(capsys):
                                   ["track", "--algorithm", "open_loop", "--gain", "ki=1"],
                                   ["track", "--mismatch", "3"], ["track", "--algorithm", "dmrac", "--initial", "x"],
                                   ["track", "--algorithm", "pid", "--initial", "cs1"],  # ignored silently before
-                                  ["track", "--algorithm", "pid", "--thesis-rate"]])
+                                  ["track", "--algorithm", "pid", "--thesis-rate"],
+                                  ["track", "--no-effects"],  # without --params: ignored silently before
+                                  ["track", "--algorithm", "pid", "--gain", "ki=0.5", "--gain", "ki=0.7"]])
 def test_bad_input_is_one_line_and_exit_2(argv, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("hyst track: error:") and "Traceback" not in "".join(err)
+
+
+def test_stability_options_without_a_resonance_are_noted_not_ignored(capsys):
+    assert main(["track", "--stability", "refuse", "--seconds", "0.05"]) == 0
+    assert "note: --stability and --notch act on a resonance" in capsys.readouterr().err
+    assert main(["track", "--seconds", "0.05"]) == 0
+    assert "note:" not in capsys.readouterr().err
 
 
 def _params(tmp_path, effects: str = "") -> str:
@@ -112,7 +121,7 @@ def test_a_model_that_runs_away_within_the_limits_is_refused_open_loop_and_repor
     would follow the runaway prediction (exit 2, one line); DPPC runs with the warning."""
     from hyst_model.core import pea_default
 
-    m = pea_default().replace(alpha1=1.0)  # finite on a sine, not finite on steps across 0–150 V
+    m = pea_default().replace(alpha1=0.9)  # finite on a sine, not finite on steps across 0–150 V
     body = "".join(f"      {k}: {v!r}\n" for k, v in m.to_dict().items())
     p = tmp_path / "runaway.yaml"
     p.write_text("/**:\n  ros__parameters:\n    model:\n      base: mbw\n" + body + "      dt: 0.0005\n")
@@ -122,6 +131,6 @@ def test_a_model_that_runs_away_within_the_limits_is_refused_open_loop_and_repor
     assert main(["track", "--params", str(p), "--algorithm", "dppc", "--seconds", "0.1", "--json"]) == 0
     assert "diverges" in capsys.readouterr().err
     ok = tmp_path / "ok.yaml"
-    ok.write_text(p.read_text().replace("alpha1: 1.0", f"alpha1: {pea_default().alpha1!r}"))
+    ok.write_text(p.read_text().replace("alpha1: 0.9", f"alpha1: {pea_default().alpha1!r}"))
     assert main(["track", "--params", str(ok), "--algorithm", "open_loop", "--seconds", "0.1", "--json"]) == 0
     assert "diverges" not in capsys.readouterr().err

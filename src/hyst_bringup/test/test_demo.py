@@ -19,6 +19,9 @@ def test_demo_records_a_bag_and_prints_the_summary(tmp_path):
     rows = {ln.split()[0]: ln.split() for ln in proc.stdout.splitlines() if ln.startswith(("dppc ", "pid "))}
     assert set(rows) == {"dppc", "pid"}
     assert float(rows["dppc"][2]) < 0.01 < float(rows["pid"][2])  # RMSE in µm: DPPC at the noise floor
+    # lockstep: each segment is 1 s of the stage's time, 2000 samples less the 0.25 s settling skip, whatever the
+    # load (by the wall clock a loaded machine scored DPPC on 367-828 of them)
+    assert all(abs(int(rows[a][1]) - 1500) <= 5 for a in ("dppc", "pid")), proc.stdout
     bags = list(tmp_path.glob("demo_*"))
     assert len(bags) == 1
     states = read_joint_states(bags[0], "/stage/state")
@@ -60,9 +63,20 @@ def test_warm_up_runs_each_algorithm_and_rejects_unknown_ones():
 
 
 def test_demo_refuses_a_bad_rt_priority_with_one_line(tmp_path):
-    proc = subprocess.run([HYST, "demo", "--rt-priority", "120", "--bags", str(tmp_path)], capture_output=True,
+    bags = tmp_path / "new" / "bags"
+    proc = subprocess.run([HYST, "demo", "--rt-priority", "120", "--bags", str(bags)], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0 and "rt-priority" in proc.stderr
+    assert not (tmp_path / "new").exists()  # refused before anything was made
+
+
+@pytest.mark.parametrize("where", ["a_file", "a_file/below"])
+def test_demo_refuses_a_bags_path_it_cannot_use_with_one_line(tmp_path, where):
+    (tmp_path / "a_file").write_text("mine\n")
+    proc = subprocess.run([HYST, "demo", "--schedule", "dppc:0.2", "--bags", str(tmp_path / where)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr and "--bags" in proc.stderr, proc.stderr
+    assert (tmp_path / "a_file").read_text() == "mine\n"
 
 
 def test_the_summary_says_when_the_machine_missed_real_time_periods():

@@ -26,9 +26,10 @@ from hyst_model.io.csvio import write_csv
 from hyst_model.io.outputs import check_output
 
 from .errors import ConfigError
-from .excitation import DEFAULT_PARTS, DEFAULT_RATE, MAX_RATE, MIN_RATE, PARTS, ExcitationSpec, build_excitation
+from .excitation import (BAND_PARTS, DEFAULT_PARTS, DEFAULT_RATE, MAX_RATE, MIN_RATE, PARTS, PERIODIC_PARTS,
+                         ExcitationSpec, build_excitation)
 
-__all__ = ["register", "run", "spec_from_args"]
+__all__ = ["register", "run", "spec_from_args", "unused_options"]
 
 
 def _floats(text: str, what: str) -> tuple[float, ...]:
@@ -98,9 +99,25 @@ def spec_from_args(args: argparse.Namespace) -> ExcitationSpec:
                           f_lo=args.f_lo, f_hi=args.f_hi, seconds=args.seconds, seed=args.seed)
 
 
+#: Options that only some parts use: (the parts, the option's attribute) — given for none of them, a note says so.
+_PART_OPTIONS = ((BAND_PARTS, ("f_lo", "f_hi", "seconds")), (PERIODIC_PARTS, ("frequency", "periods")),
+                 (("steps",), ("n_steps", "step_rise")), (PERIODIC_PARTS + BAND_PARTS, ("amplitudes",)))
+
+
+def unused_options(spec: ExcitationSpec) -> list[str]:
+    """Options set away from their defaults that none of ``spec.parts`` uses (a note, not an error: the same
+    command line with other ``--parts`` uses them)."""
+    d = ExcitationSpec()
+    return [f"--{k.replace('_', '-')}" for parts, keys in _PART_OPTIONS if not set(spec.parts) & set(parts)
+            for k in keys if getattr(spec, k) != getattr(d, k)]
+
+
 def run(args: argparse.Namespace) -> int:
     out = check_output(args.out, force=args.force, what="--out")
     spec = spec_from_args(args)
+    unused = unused_options(spec)
+    if unused:
+        print(f"hyst excite: note: {', '.join(unused)} not used by the parts {','.join(spec.parts)}", file=sys.stderr)
     ex = build_excitation(spec)
     write_csv(out, {"t": ex.t, "u": ex.u}, force=args.force)
     summary = {"out": str(out), "rate": 1.0 / spec.dt, "samples": int(ex.u.size), "seconds": ex.duration,

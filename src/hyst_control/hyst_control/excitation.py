@@ -35,11 +35,14 @@ from hyst_common.profiles import rest_voltage
 
 from .errors import ConfigError
 
-__all__ = ["PARTS", "DEFAULT_PARTS", "DEFAULT_RATE", "MIN_RATE", "MAX_RATE", "ExcitationSpec", "Excitation",
-           "build_excitation", "from_samples"]
+__all__ = ["PARTS", "DEFAULT_PARTS", "BAND_PARTS", "PERIODIC_PARTS", "DEFAULT_RATE", "MIN_RATE", "MAX_RATE",
+           "ExcitationSpec", "Excitation", "build_excitation", "from_samples"]
 
 #: Every part :func:`build_excitation` can play.
 PARTS = ("steps", "sines", "triangles", "multisine", "sweep", "noise")
+#: The parts that use the band ``f_lo`` … ``f_hi`` and ``seconds``, and those that use ``frequency``/``periods``.
+BAND_PARTS = ("multisine", "sweep", "noise")
+PERIODIC_PARTS = ("sines", "triangles")
 #: The parts played when none are named (the excitation earlier sessions measured the lab workflow with).
 DEFAULT_PARTS = ("steps", "sines", "triangles", "multisine", "sweep")
 #: Sample rate (Hz) of ``hyst excite`` and ``hyst_excite_node`` when none is given, and the range both take.
@@ -114,9 +117,10 @@ class ExcitationSpec:
         if not self.amplitudes or not all(0.0 < a <= 1.0 for a in self.amplitudes):
             raise ConfigError(f"amplitudes must be fractions of the range in (0, 1], got {self.amplitudes}")
         nyq = 0.5 / self.dt
-        if not 0.0 < self.f_lo < self.f_hi < nyq:
+        # only what the parts use: the band's defaults refused a steps-only excitation at 10 Hz
+        if set(self.parts) & set(BAND_PARTS) and not 0.0 < self.f_lo < self.f_hi < nyq:
             raise ConfigError(f"need 0 < f_lo < f_hi < Nyquist ({nyq:g} Hz), got {self.f_lo:g}, {self.f_hi:g}")
-        if not 0.0 < self.frequency < nyq:
+        if set(self.parts) & set(PERIODIC_PARTS) and not 0.0 < self.frequency < nyq:
             raise ConfigError(f"frequency must be in (0, {nyq:g}) Hz, got {self.frequency:g}")
         if self.periods < 1 or self.n_steps < 1 or self.hold < 0 or self.seconds <= 0 or not self.step_rise >= 0:
             raise ConfigError("periods and n_steps must be >= 1, hold >= 0 s, step_rise >= 0 s, seconds > 0 s")

@@ -51,6 +51,18 @@ def test_bad_arguments_are_one_line_exit_2_and_write_nothing(tmp_path, capsys, e
     assert not out.exists()
 
 
+def test_a_band_the_parts_do_not_use_is_not_checked_and_unused_options_are_noted(tmp_path, capsys):
+    """Steps only at 10 Hz: the multisine band's defaults (0.5-50 Hz) refused it against a 5 Hz Nyquist; options
+    only other parts use were taken without a word."""
+    assert hyst(["excite", "--out", str(tmp_path / "a.csv"), "--rate", "10", "--parts", "steps", "--hold", "1"]) == 0
+    assert "note:" not in capsys.readouterr().err
+    assert hyst(["excite", "--out", str(tmp_path / "b.csv"), "--parts", "steps", "--f-lo", "1", "--f-hi", "10",
+                 "--amplitudes", "0.5"]) == 0
+    assert "note: --f-lo, --f-hi, --amplitudes not used by the parts steps" in capsys.readouterr().err
+    assert hyst(["excite", "--out", str(tmp_path / "c.csv"), "--rate", "10", "--parts", "sweep"]) == 2  # it uses it
+    assert "Nyquist" in capsys.readouterr().err and not (tmp_path / "c.csv").exists()
+
+
 def test_an_existing_file_is_kept_without_force(tmp_path, capsys):
     out = tmp_path / "u.csv"
     out.write_text("mine\n")

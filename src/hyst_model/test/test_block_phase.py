@@ -48,3 +48,16 @@ def test_records_that_move_throughout_keep_the_unshifted_grid(kind):
 
 def test_a_constant_input_keeps_the_unshifted_grid():
     assert block_phase(np.full(5000, 3.0)) == 0.0
+
+
+def test_the_rmse_of_a_diverging_residual_is_inf_without_a_warning():
+    """EPSO's diverging particles printed numpy's 'overflow encountered in multiply' on the user's terminal."""
+    import warnings
+
+    from hyst_model.identify.result import rmse
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert rmse(np.array([1e200, -1e200, 0.0])) == np.inf
+        assert rmse(np.array([3.0, -3.0])) == 3.0
+    assert np.isnan(rmse(np.array([])))

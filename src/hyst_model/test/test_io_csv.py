@@ -1,4 +1,5 @@
 """CSV IO: SI native format, column/unit options, and clear errors."""
+import re
 from pathlib import Path
 import numpy as np
 import pytest
@@ -59,6 +60,25 @@ def test_nan_rows_reported(tmp_path):
     p.write_text("t,u,y\n" + rows.replace("0.005,5,5e-07", "0.005,,5e-07") + "\n")
     with pytest.raises(DataError, match=r"1 row\(s\) with NaN.*row 5, t = 0.005 s\)"):
         read_csv(p).check()
+
+
+@pytest.mark.parametrize("row,why", [("0.001,1", "line 3 has 2 fields, the header 3"),
+                                     ("0.001,1,2,3", "line 3 has 4 fields, the header 3")])
+def test_a_row_with_a_field_too_few_or_too_many_is_one_line(tmp_path, row, why):
+    """One too few came as numpy's two-line 'Some errors were detected !'; one too many was cut silently."""
+    p = tmp_path / "r.csv"
+    p.write_text(f"t,u,y\n0,1,2\n{row}\n0.002,1,2\n")
+    with pytest.raises(DataError) as err:
+        read_csv(p)
+    assert why in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("sep", [";", "\t"])
+def test_another_separator_is_named_not_sent_to_columns(tmp_path, sep):
+    p = tmp_path / "s.csv"
+    p.write_text(sep.join("tuy") + "\n" + sep.join(["0", "1", "2"]) + "\n")
+    with pytest.raises(DataError, match=re.escape(f"separated by {sep!r}; hyst reads comma-separated CSV")):
+        read_csv(p)
 
 
 def test_empty_and_header_only(tmp_path):

@@ -196,3 +196,53 @@ def test_a_key_the_model_cannot_use_is_refused_not_ignored(tmp_path, extra, why)
 
     with pytest.raises(ParamsError, match=re.escape(why)):
         read_params(_mbw_file(tmp_path, extra))
+
+
+def _effects_file(tmp_path, effects, edit, cfg=None):
+    """A params file of mbw + ``effects`` as ``hyst fit`` writes it, then ``edit(model_section)`` by hand."""
+    from hyst_model.effects import compose
+    c = {"u_scale": 15.0, "y_scale": 5.42e-6, "dt": 5e-4, **(cfg or {})}
+    m = compose(BASE_MODELS["mbw"](c), effects, c)
+    write_params(tmp_path / "fit.yaml", spec_from_model(m, m.theta0, dt=5e-4), force=True)
+    doc = yaml.safe_load((tmp_path / "fit.yaml").read_text())
+    edit(doc["/**"]["ros__parameters"]["model"])
+    (tmp_path / "hand.yaml").write_text(yaml.safe_dump(doc))
+    return tmp_path / "hand.yaml"
+
+
+@pytest.mark.parametrize(("effects", "key", "value", "why"), [
+    (["delay"], "delay.tau", -0.5, r"model\.delay\.tau = -0\.5 s lies outside its range \[0, 0\.05\] s"),
+    (["creep"], "creep.tilt", 42.0, r"model\.creep\.tilt = 42 lies outside its range \[-0\.3, 0\.3\]"),
+    ([], "psi1", 3.0, r"model\.psi1 = 3 lies outside its range"),
+])
+def test_a_value_outside_its_parameters_range_is_refused(tmp_path, effects, key, value, why):
+    """A hand-written ``delay.tau: -0.5`` ran as no delay and ``creep.tilt: 42`` without a word; the range is the
+    one the fitters search and the checks hold on (``Model.bounds``), and a value on it still reads."""
+    def edit(model, v=value):
+        head, _, tail = key.rpartition(".")
+        (model[head] if head else model)[tail] = v
+    with pytest.raises(ParamsError, match=why):
+        read_params(_effects_file(tmp_path, effects, edit))
+    m = read_params(_effects_file(tmp_path, effects, lambda model: None)).model()
+    lo, hi = m.bounds
+    i = m.names.index(key)
+    read_params(_effects_file(tmp_path, effects, lambda model: edit(model, float(hi[i]))))  # on the bound: fine
+
+
+def test_drift_offsets_beyond_its_knots_are_refused_not_ignored(tmp_path):
+    """``knots`` lowered by hand to 3 left c4 and c5 in the file, read and never used (1 mm in them changed
+    nothing); ``knots`` of 0 or 2.5 and a non-finite span are refused when the model is built."""
+    def lower(model):
+        model["drift"]["knots"] = 3.0
+    with pytest.raises(ParamsError, match=r"model\.drift\.c4 is none of drift's parameters"):
+        read_params(_effects_file(tmp_path, ["drift"], lower))
+    def lower_and_drop(model):
+        lower(model)
+        del model["drift"]["c4"], model["drift"]["c5"]
+    assert read_params(_effects_file(tmp_path, ["drift"], lower_and_drop)).model().names[-1] == "drift.c3"
+    for key, v, why in (("knots", 0.0, "drift.knots must be a whole number between 1 and 100, not 0"),
+                        ("knots", 2.5, "not 2.5"), ("span", float("nan"), "drift.span must be a finite number")):
+        def bad(model, key=key, v=v):
+            model["drift"][key] = v
+        with pytest.raises((ParamsError, EffectError), match=re.escape(why)):
+            read_params(_effects_file(tmp_path, ["drift"], bad))

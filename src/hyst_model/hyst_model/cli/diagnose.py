@@ -70,7 +70,8 @@ def _clean(o):
 
 def _text(d, source: str, adm=None) -> str:
     from ..effects.signals import fmt_len
-    lines = [f"hyst diagnose: {source} ({d.n_samples} samples at {1.0 / d.dt:.6g} Hz, {d.seconds:.1f} s)",
+    lines = [f"hyst diagnose: {source} ({d.n_samples} samples at {1.0 / d.dt:.6g} Hz, "
+             f"diagnosed in {d.seconds:.1f} s)",
              f"baseline {d.base}: validation RMSE {fmt_len(d.baseline_rmse)} "
              f"(training {fmt_len(d.baseline_rmse_train)}); sensor noise floor ≈ {fmt_len(d.noise)}",
              "candidates, best first:"]

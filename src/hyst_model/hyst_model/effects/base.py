@@ -34,6 +34,7 @@ Fixed configuration (``dt``, ``u_scale``, ``y_scale``, ...) reaches the effect t
 """
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -117,6 +118,11 @@ class Effect:
 
     def __init__(self, config: Mapping[str, object] | None = None):
         cfg: dict[str, Any] = dict(config or {})
+        # a non-finite setting of this effect was carried into the fit and written back (drift.span: .nan)
+        bad = sorted(k for k, v in cfg.items() if k.startswith(f"{self.name}.") and isinstance(v, float)
+                     and not math.isfinite(v))
+        if bad:
+            raise EffectError(f"{bad[0]} must be a finite number, not {cfg[bad[0]]}")
         self.dt = float(cfg.get("dt", 1e-3) or 1e-3)
         self.u_scale = float(cfg.get("u_scale", 1.0) or 1.0)
         self.y_scale = float(cfg.get("y_scale", 1.0) or 1.0)

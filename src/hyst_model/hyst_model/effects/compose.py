@@ -153,15 +153,20 @@ def effects_data_config(names: Sequence[str], t: np.ndarray, u: np.ndarray, y: n
     return out
 
 
-def effect_keys(name: str) -> tuple[frozenset[str], frozenset[str]] | None:
+def effect_keys(name: str, settings_in: Mapping[str, object] | None = None
+                ) -> tuple[frozenset[str], frozenset[str]] | None:
     """The keys (local names) effect ``name`` reads from a params file, over all its variants: its settings
     (:meth:`Effect.config`) and its parameters (with :meth:`Effect.legacy_values`). None for an effect this
     process does not know, or whose constructor needs more than the scales (a user effect): its keys are then not
-    checked (``--config``, :func:`hyst_model.io.params_file.read_params`)."""
+    checked (``--config``, :func:`hyst_model.io.params_file.read_params`).
+
+    ``settings_in``: the file's own settings (dotted keys), which fix what is not a variant — a drift of 3 knots
+    has no ``c4`` (a hand-lowered ``knots`` left fitted offsets in the file, read and never used)."""
     cls = EFFECTS.get(name)
     if cls is None:
         return None
-    base = {"dt": 1e-3, "u_scale": 1.0, "y_scale": 1e-6}
+    own = {k: v for k, v in (settings_in or {}).items() if str(k).startswith(f"{name}.")}
+    base = {"dt": 1e-3, "u_scale": 1.0, "y_scale": 1e-6, **own}
     settings: set[str] = set()
     params: set[str] = set()
     try:

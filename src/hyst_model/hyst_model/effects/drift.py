@@ -34,6 +34,8 @@ Identification and simulation are the same for both (the model's output is the r
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..errors import EffectError
@@ -42,7 +44,7 @@ from .base import Effect
 from .online import OnlineEffect
 from .signals import corr, smooth
 
-__all__ = ["Drift", "DriftObserver", "SPACINGS", "SIDES", "OBSERVER_TAU"]
+__all__ = ["Drift", "DriftObserver", "SPACINGS", "SIDES", "OBSERVER_TAU", "MAX_KNOTS"]
 
 #: Time constant (s) of the drift observer: long against the loop's own error dynamics (a few ms), so the estimate
 #: takes no part in them and passes little sensor noise (about sqrt(dt/2τ) of it: 7 % at 2 kHz), short against a
@@ -52,6 +54,9 @@ OBSERVER_TAU = 0.05
 
 #: Knot spacings over the span: even, or denser at the start (quadratic).
 SPACINGS = ("even", "early")
+
+#: Knots at most: each is a parameter, and each segment must still be seconds long to predict held-out data.
+MAX_KNOTS = 100
 
 #: Where the offset drifts (``drift.side``): the stage moves, or the sensor's reading does (module docstring).
 SIDES = ("stage", "sensor")
@@ -72,8 +77,14 @@ class Drift(Effect):
 
     def __init__(self, config=None):
         super().__init__(config)
-        self.knots = int(float(self._config.get("drift.knots", 5)))
+        knots = float(self._config.get("drift.knots", 5))
+        # 0 and -1 ended in an IndexError, 2.5 ran as 2, 1000 ran for minutes
+        if not (math.isfinite(knots) and knots == int(knots) and 1 <= knots <= MAX_KNOTS):
+            raise EffectError(f"drift.knots must be a whole number between 1 and {MAX_KNOTS}, not {knots:g}")
+        self.knots = int(knots)
         self.span = float(self._config.get("drift.span", 0.0) or 0.0)
+        if not (math.isfinite(self.span) and self.span >= 0.0):  # nan was fitted with and written back
+            raise EffectError(f"drift.span must be a duration ≥ 0 s (0: the record's own), not {self.span:g}")
         self.spacing = str(self._config.get("drift.spacing", "even"))
         if self.spacing not in SPACINGS:
             raise EffectError(f"drift.spacing must be one of {', '.join(SPACINGS)}, not {self.spacing!r}")

@@ -135,7 +135,7 @@ class DynamicsEffect(Effect):
         if self.structure not in STRUCTURES:
             raise EffectError(f"dynamics.structure must be one of {', '.join(STRUCTURES)}, not {self.structure!r}")
         sub = float(cfg.get("dynamics.substeps", 10))
-        if sub != int(sub) or not 1 <= sub <= 1000:  # 2.5 ran (and was saved) as 2
+        if not (np.isfinite(sub) and sub == int(sub) and 1 <= sub <= 1000):  # 2.5 ran (and was saved) as 2
             raise EffectError(f"dynamics.substeps must be a whole number between 1 and 1000, not {sub:g}")
         self.substeps = int(sub)
         self.hold = str(cfg.get("dynamics.hold", "zoh"))

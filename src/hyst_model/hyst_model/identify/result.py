@@ -33,7 +33,10 @@ __all__ = ["Split", "make_split", "block_mask", "block_phase", "FitResult", "rms
 def rmse(a: np.ndarray) -> float:
     """Root mean square (3.26); NaN for an empty array."""
     a = np.asarray(a, dtype=np.float64)
-    return float(np.sqrt(np.mean(a * a))) if a.size else float("nan")
+    if not a.size:
+        return float("nan")
+    with np.errstate(over="ignore"):  # a diverging candidate's residual: inf is its RMSE, not a warning on stderr
+        return float(np.sqrt(np.mean(a * a)))
 
 
 @dataclass(frozen=True)

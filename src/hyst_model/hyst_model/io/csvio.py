@@ -73,6 +73,10 @@ def _read_columns(path: Path, columns: tuple[str, ...], units: tuple[str, ...] |
     if missing:
         hint = (" (name the columns with --columns and their units with --units)"
                 if tuple(columns) == tuple(quantities) else "")
+        other = next((d for d in (";", "\t", "|") if d in lines[0]), None)
+        if other is not None and len(header) == 1:  # told to name the columns, which does not help
+            raise DataError(f"{path}: the header is separated by {other!r}; hyst reads comma-separated CSV "
+                            f"(replace the separator with ',')")
         raise DataError(f"{path}: column(s) {', '.join(missing)} not in the header {','.join(header)}{hint}")
     if units:  # a unit the column's own name contradicts (y_um read as nm: 1000x off, silently)
         for q, c, un in zip(quantities, columns, units):
@@ -86,8 +90,8 @@ def _read_columns(path: Path, columns: tuple[str, ...], units: tuple[str, ...] |
     if len(lines) < 2 or not any(ln.strip() for ln in lines[1:]):
         raise DataError(f"{path}: header only, no data rows")
     width = len(header)
-    for k, ln in enumerate(lines[1:], start=2):  # a row with a field too many was cut silently (one too few is
-        if ln.strip() and ln.count(",") + 1 > width:  # refused by genfromtxt)
+    for k, ln in enumerate(lines[1:], start=2):  # a row with a field too many was cut silently, one too few
+        if ln.strip() and ln.count(",") + 1 != width:  # came as numpy's two-line "Some errors were detected !"
             raise DataError(f"{path}: malformed rows (line {k} has {ln.count(',') + 1} fields, the header "
                             f"{width})")
     try:

@@ -188,7 +188,7 @@ def _check_effect_keys(path: Path, effects: list, flat: Mapping) -> None:
     ``drift.sid: sensor`` was read without a word and the effect ran with its default."""
     from ..effects.compose import effect_keys
     for name in effects:
-        keys = effect_keys(name)
+        keys = effect_keys(name, flat)
         if keys is None:
             continue
         known = keys[0] | keys[1]
@@ -273,7 +273,7 @@ def read_params(path: str | Path) -> ParamsSpec:
     bad = [k for k, v in spec.values.items() if not np.isfinite(v)]
     if bad:
         raise ParamsError(f"{path}: non-finite value for {', '.join(bad)}")
-    spec.theta(m)  # every parameter present
+    _check_ranges(path, m, spec.theta(m))  # every parameter present, each within its range
     # A missing scale silently became 1.0 (a −6 cm output); a non-positive dt breaks every per-sample model.
     needed = [k for k in ("u_scale", "y_scale") if k in m.config() and k not in spec.config]
     if needed:
@@ -284,3 +284,14 @@ def read_params(path: str | Path) -> ParamsSpec:
         if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
             raise ParamsError(f"{path}: model.{k} must be a positive number, got {v!r}")
     return spec
+
+
+def _check_ranges(path: Path, m: Model, theta: np.ndarray) -> None:
+    """Refuse a value outside the range its parameter is defined on (:attr:`Model.bounds`, where the fitters search
+    and the checks hold): a hand-written ``delay.tau: -0.5`` ran as no delay, ``creep.tilt: 42`` without a word."""
+    lo, hi = m.bounds
+    for p, v, a, b in zip(m.params(), theta, lo, hi):
+        if not a <= v <= b:
+            unit = f" {p.unit}" if p.unit else ""
+            raise ParamsError(f"{path}: model.{p.name} = {v:g}{unit} lies outside its range [{a:g}, {b:g}]{unit}; "
+                              "correct it or refit")
