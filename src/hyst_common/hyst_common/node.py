@@ -64,7 +64,10 @@ class _AllOrNothingService(ParameterService):
     """The node's parameter services, ``set_parameters`` going through :meth:`AtomicParametersNode.set_parameters`."""
 
     def _set_parameters_callback(self, request, response):
-        params = [Parameter.from_parameter_msg(p) for p in request.parameters]
+        params, bad = _from_msgs(request.parameters)
+        if bad:
+            response.results = [SetParametersResult(successful=False, reason=bad)] * len(request.parameters)
+            return response
         node = self._get_node()
         try:
             response.results = node.set_parameters(params)
@@ -73,6 +76,26 @@ class _AllOrNothingService(ParameterService):
             response.results = [SetParametersResult(successful=False, reason=f"undeclared parameter(s): {names}; "
                                                     "none of this request applied")] * len(params)
         return response
+
+    def _set_parameters_atomically_callback(self, request, response):
+        params, bad = _from_msgs(request.parameters)
+        if bad:
+            response.result = SetParametersResult(successful=False, reason=bad)
+            return response
+        try:
+            response.result = self._get_node().set_parameters_atomically(params)
+        except ParameterNotDeclaredException as err:
+            response.result = SetParametersResult(successful=False, reason=str(err))
+        return response
+
+
+def _from_msgs(msgs) -> tuple[list[Parameter], str]:
+    """The request's parameters, or the reason one cannot be read: a value of an unknown type code raised inside
+    rclpy's service callback and killed the node (exit 1, traceback)."""
+    try:
+        return [Parameter.from_parameter_msg(p) for p in msgs], ""
+    except (ValueError, TypeError, AttributeError) as err:
+        return [], f"malformed parameter in the request ({err}); none of this request applied"
 
 
 class AtomicParametersNode(Node):

@@ -85,6 +85,40 @@ def test_the_remote_service_is_all_or_nothing_too(ctx):
         node.destroy_node()
 
 
+@pytest.mark.parametrize("service", ["set_parameters", "set_parameters_atomically"])
+def test_a_malformed_parameter_request_is_refused_and_the_node_lives_on(ctx, service):
+    """A value of an unknown type code raised inside rclpy's service callback and killed the node (exit 1)."""
+    from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterValue
+    from rcl_interfaces.srv import SetParameters, SetParametersAtomically
+
+    node = Window(context=ctx)
+    peer = rclpy.create_node("peer", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    ex.add_node(peer)
+    srv = SetParameters if service == "set_parameters" else SetParametersAtomically
+    client = peer.create_client(srv, f"/window/{service}")
+    try:
+        deadline = time.monotonic() + 30
+        while not client.service_is_ready() and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.05)
+        bad = ParameterMsg(name="v_max", value=ParameterValue(type=42))
+        good = ParameterMsg(name="v_min", value=ParameterValue(type=3, double_value=10.0))  # 3: DOUBLE
+        fut = client.call_async(srv.Request(parameters=[good, bad]))
+        ex.spin_until_future_complete(fut, timeout_sec=30)
+        res = fut.result()
+        results = res.results if service == "set_parameters" else [res.result]
+        assert results and not any(r.successful for r in results) and "malformed" in results[0].reason
+        assert _values(node) == (0.0, 150.0)  # nothing applied, and the node still answers
+        fut = client.call_async(srv.Request(parameters=[good]))
+        ex.spin_until_future_complete(fut, timeout_sec=30)
+        assert _values(node) == (10.0, 150.0)
+    finally:
+        ex.shutdown()
+        peer.destroy_node()
+        node.destroy_node()
+
+
 def test_a_whole_number_for_a_float_parameter_is_that_number(ctx):
     """``-p v_max:=100`` (or ``zeta1: 1`` in a params file) is an INTEGER to ROS: rclpy refused it at start
     ("expecting type 'DOUBLE'") and in every set; it is the float it says, while a string stays refused."""
