@@ -100,6 +100,14 @@ class IdentConfig:
             raise ValueError("topic must be absolute (start with /)")
         if self.controller_node and not self.controller_node.startswith("/"):
             raise ValueError("controller_node must be a fully qualified node name such as /hyst_controller")
+        if self.controller_node:  # /bad-name passed and then killed the node when the push made its client
+            from rclpy.exceptions import InvalidServiceNameException
+            from rclpy.validate_full_topic_name import validate_full_topic_name
+            try:
+                validate_full_topic_name(f"{self.controller_node}/set_parameters", is_service=True)
+            except InvalidServiceNameException as err:
+                raise ValueError(f"controller_node {self.controller_node!r} is not a valid ROS node name (letters, "
+                                 "digits and underscores, each part not starting with a digit)") from err
         return self
 
     def check_effect_config(self) -> None:

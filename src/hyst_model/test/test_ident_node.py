@@ -14,7 +14,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from hyst_model.core import PARAM_NAMES, pea_default
-from hyst_model.ident_node import IdentNode
+from hyst_model.ident_node import IdentConfig, IdentNode
 from hyst_model.io import read_params, write_state_bag
 
 pytestmark = pytest.mark.ros
@@ -251,3 +251,11 @@ def test_every_parameter_can_be_read_back_and_an_effect_config_error_names_the_p
         assert ok.successful and node._read().effects == ("creep",)
     finally:
         node.destroy_node()
+
+
+@pytest.mark.parametrize("name", ["/bad-name", "/1controller", "/a//b"])
+def test_a_controller_node_name_ros_cannot_use_is_refused_when_set(name):
+    """'/bad-name' was taken and killed the node after its first fit, when the push created its client."""
+    with pytest.raises(ValueError, match="not a valid ROS node name"):
+        IdentConfig(controller_node=name).validate()
+    assert IdentConfig(controller_node="/ns/hyst_controller").validate().controller_node == "/ns/hyst_controller"
