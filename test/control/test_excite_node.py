@@ -78,6 +78,7 @@ def test_a_gap_is_faded_in_not_jumped(ctx):
     def answer(k):  # the state stamped k periods after the first
         m = JointState()
         m.header.stamp.sec, m.header.stamp.nanosec = divmod(k * 1_000_000, 1_000_000_000)
+        m.position = [1e-6]
         exc._on_state(m)
         return sent[-1].effort[0]
 
@@ -95,6 +96,46 @@ def test_a_gap_is_faded_in_not_jumped(ctx):
         assert np.all(np.abs(np.diff(after)) <= np.pi / 2 * jumps[k0] / n + np.abs(np.diff(expect)) + 1e-9)
         np.testing.assert_array_equal(after[n:], expect[n:])       # ... and is on the excitation after step_rise
         assert answer(k0 + 299 + n + 3) == u[k0 + 300 + n + 3]     # the timing of the rest is unchanged
+    finally:
+        exc.destroy_node()
+
+
+def test_a_stray_or_unreadable_state_is_counted_not_answered_and_a_real_pause_is_played_on(ctx):
+    """One state stamped in 2033 with a NaN position ended a 17 800-sample excitation after 100 samples, silently."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    exc = ExciteNode(context=ctx, parameter_overrides=[Parameter("rate", value=1000.0),
+                                                        Parameter("parts", value="steps"), Parameter("n_steps", value=30)])
+    sent, diags = [], []
+    exc._pub.publish = sent.append
+    exc._pub.get_subscription_count = lambda: 1
+    exc._diag_pub.publish = diags.append
+
+    def state(sec, nsec=0, pos=(1e-6,)):
+        m = JointState()
+        m.header.stamp.sec, m.header.stamp.nanosec = sec, nsec
+        m.position = list(pos)
+        n = len(sent)
+        exc._on_state(m)
+        return len(sent) > n
+
+    try:
+        assert all(state(0, k * 1_000_000) for k in range(100))
+        assert not state(2_000_000_000, pos=(float("nan"),))       # unreadable
+        assert not state(2_000_000_000)                           # a jump of decades, unconfirmed
+        assert not state(0, 50_000_000)                           # before the last state answered
+        assert not state(0, 99_000_000, pos=())                   # no position at all
+        assert state(0, 100_000_000) and not exc.done             # the run goes on where it was
+        assert exc.ignored == {"unreadable": 2, "out_of_order": 1, "jump": 1}
+        assert not state(3) and state(3, 1_000_000)               # a real 2.9 s pause: confirmed, played on
+        k = 1 + int(round(1000 * (exc.spec.step_rise + 0.01)))  # past the fade from the held voltage
+        assert all(state(3, 1_000_000 * j) for j in range(2, k + 1))
+        assert sent[-1].effort[0] == exc.excitation.u[3000 + k + 1]  # on time
+        exc._publish_diagnostics()
+        st = diags[-1].status[0]
+        vals = {kv.key: kv.value for kv in st.values}
+        assert st.level == st.WARN and vals["ignored_jump"] == "2" and vals["ignored_unreadable"] == "2"
+        assert isinstance(diags[-1], DiagnosticArray)
     finally:
         exc.destroy_node()
 
@@ -126,6 +167,7 @@ def test_plays_a_file_written_by_hyst_excite_sample_for_sample(ctx, tmp_path):
         for k in range(len(u_file)):
             m = JointState()
             m.header.stamp.sec, m.header.stamp.nanosec = divmod(k * 1_000_000, 1_000_000_000)
+            m.position = [1e-6]
             exc._on_state(m)
         assert exc.done
         np.testing.assert_array_equal([c.effort[0] for c in sent[:-1]], u_file[1:])

@@ -12,12 +12,15 @@ node answers once more with the rest voltage and stops (exit 0). Parameters (all
 ``file`` (play a ``t,u`` CSV in s, V instead — ``hyst excite --out`` writes one; it must be sampled at ``rate``,
 stay inside ``v_min``..``v_max`` and ``slew_max`` and start and end at rest, or the node refuses to start, saying
 which sample breaks which limit) and ``wait_for_subscribers`` (no answer until ``/stage/command`` has that many
-subscribers: 2 with a recorder).
+subscribers: 2 with a recorder). A state without a finite position, stamped before the last one answered, or more
+than :data:`MAX_JUMP` s ahead of it unconfirmed by the next is not answered but counted (log and ``/diagnostics``,
+published every second with the samples answered).
 """
 from __future__ import annotations
 
 import math
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from sensor_msgs.msg import JointState
 
@@ -29,7 +32,11 @@ from .errors import ControlError
 from .excitation import (DEFAULT_RATE, MAX_RATE, MIN_RATE, PARTS, Excitation, ExcitationSpec, build_excitation,
                          from_samples)
 
-__all__ = ["ExciteNode", "main"]
+__all__ = ["ExciteNode", "main", "MAX_JUMP"]
+
+#: A state stamped more than this many seconds after the last one answered is answered only once a second state
+#: confirms the jump: the stage paused (a stalled driver) rather than a stray message.
+MAX_JUMP = 1.0
 
 
 class ExciteNode(AtomicParametersNode):
@@ -47,10 +54,17 @@ class ExciteNode(AtomicParametersNode):
         self._v_last: float | None = None   # the command sent for it (V); set with _k_last
         self._resume = (0.0, 0.0)       # (stamp s, offset V) of the last gap: the offset fades over step_rise
         self.answered = 0
+        # states not answered: unreadable (no finite position), stamped before the last one answered, or a jump
+        # ahead of more than MAX_JUMP s not yet confirmed by a second state (a stray message stamped in 2033 ended
+        # the excitation after 100 of 17 800 samples, without a word)
+        self.ignored = {"unreadable": 0, "out_of_order": 0, "jump": 0}
+        self._jump_at: int | None = None  # sample index of an unconfirmed jump
         self.add_on_set_parameters_callback(
             lambda _p: SetParametersResult(successful=False, reason="excitation parameters apply at start only"))
         self._pub = self.create_publisher(JointState, "/stage/command", 10000)  # as the controller's: see there
         self.create_subscription(JointState, "/stage/state", self._on_state, 1000)
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_timer(1.0, self._publish_diagnostics)
         ex = self.excitation
         what = f"file {self.source}" if self.source else ", ".join(self.spec.parts)
         self.get_logger().info(
@@ -132,10 +146,14 @@ class ExciteNode(AtomicParametersNode):
                 return  # the lockstep sim re-announces sample 0; a realtime stage just starts later
             self._t_first = t
         k = int(round((t - self._t_first) / self.spec.dt)) + 1
+        if not self._plausible(msg, t, k):
+            return
         u = self.excitation.u
         if k >= len(u):
             v, self.done = self.spec.rest, True
-            self.get_logger().info(f"excitation finished after {self.answered} samples")
+            self.get_logger().info(f"excitation finished after {self.answered} samples"
+                                   + (f"; {sum(self.ignored.values())} state(s) not answered: {self.ignored}"
+                                      if any(self.ignored.values()) else ""))
         else:
             v = self._blended(t, k)
         out = JointState()
@@ -145,6 +163,40 @@ class ExciteNode(AtomicParametersNode):
         self._pub.publish(out)
         self._k_last, self._v_last = k, out.effort[0]
         self.answered += 1
+
+    def _plausible(self, msg: JointState, t: float, k: int) -> bool:
+        """Whether to answer this state: a finite position, not before the last state answered, and a jump ahead
+        of more than :data:`MAX_JUMP` s only when a second state confirms it (a stage that really paused; the
+        lockstep sim re-announces its state until answered). Every state refused is counted and logged."""
+        why = None
+        if not (len(msg.position) and all(math.isfinite(p) for p in msg.position) and math.isfinite(t)):
+            why = "unreadable"
+        elif self._k_last is not None and k < self._k_last:
+            why = "out_of_order"
+        elif self._k_last is not None and (k - self._k_last) * self.spec.dt > MAX_JUMP:
+            confirmed = self._jump_at is not None and abs(k - self._jump_at) <= 2
+            self._jump_at = None if confirmed else k
+            why = None if confirmed else "jump"
+        if why is None:
+            return True
+        self.ignored[why] += 1
+        self.get_logger().warning(f"state stamped {t:.6g} s not answered ({why.replace('_', ' ')}; after sample "
+                                  f"{self._k_last}); {sum(self.ignored.values())} ignored so far",
+                                  throttle_duration_sec=1.0)
+        return False
+
+    def _publish_diagnostics(self) -> None:
+        st = DiagnosticStatus(name="hyst_excite", hardware_id="stage")
+        n = sum(self.ignored.values())
+        st.level = DiagnosticStatus.WARN if n else DiagnosticStatus.OK
+        st.message = (f"{n} state(s) not answered" if n else "playing") if not self.done else "finished"
+        vals = {"answered": self.answered, "samples": int(self.excitation.u.size), "done": self.done,
+                **{f"ignored_{k}": v for k, v in self.ignored.items()}}
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self._diag_pub.publish(arr)
 
     def flush(self, timeout: float) -> bool:
         """Wait until every subscriber has acknowledged every command (reliable QoS), at most ``timeout`` s.
