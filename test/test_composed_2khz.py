@@ -82,3 +82,47 @@ def test_composed_realtime_samples_the_reference_in_process():
 def test_a_bad_reference_rate_is_refused():
     proc = subprocess.run([str(EXE), "--reference-rate", "0"], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "--reference-rate" in proc.stderr
+
+
+@pytest.mark.parametrize("bad,why", [("params_file:=/nonexistent.yaml", "no such params file"),
+                                     ("rate:=-5.0", "rate")])
+def test_a_bad_start_up_parameter_is_one_line_and_exit_2(bad, why):
+    """As each node alone (run_node): the loop gave a traceback and exit 1."""
+    proc = subprocess.run([str(EXE), "--seconds", "1", "--ros-args", "-p", bad], env=dict(os.environ),
+                          capture_output=True, text=True, timeout=120)
+    err = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(err) == 1 and err[0].startswith("hyst_loop_node: error:") and why in err[0]
+
+
+def test_one_sigint_stops_the_loop_cleanly_with_its_summary():
+    """A SIGINT raised inside a callback printed '[FATAL] Exception in callback' (2 of 7 stops); now a flag."""
+    import signal
+    import threading
+
+    proc = subprocess.Popen([str(EXE), "--summary-json", "--ros-args", "-p", "rate:=1000.0"], env=dict(os.environ),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    err: list[str] = []
+    ready = threading.Event()
+
+    def read() -> None:
+        for line in proc.stderr:
+            err.append(line)
+            if "controller ready" in line:  # the nodes are built: the loop's own signal handling is in place
+                ready.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        assert ready.wait(timeout=120), "".join(err)[-2000:]
+        proc.send_signal(signal.SIGINT)
+        out = proc.stdout.read()
+        proc.wait(timeout=120)
+        reader.join(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    text = "".join(err)
+    assert proc.returncode == 0, text[-2000:]
+    assert "Traceback" not in text and "FATAL" not in text, text[-2000:]
+    assert json.loads([ln for ln in out.splitlines() if ln.startswith("{")][-1])["controller"]

@@ -32,14 +32,18 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import threading
 import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
+from hyst_common.node import STARTUP_ERRORS
 from hyst_common.startup import end_quiet_start
+from hyst_common.stopping import StopGuard
 from hyst_control.controller_node import ControllerNode
 from hyst_control.controllers import parse_schedule
 from hyst_control.errors import ControlError
@@ -59,7 +63,7 @@ def _executor():
 
 def main(args=None) -> int:
     """Console script ``hyst_loop_node``."""
-    end_quiet_start()  # Ctrl-C from here: KeyboardInterrupt, caught below (the summary is still printed)
+    end_quiet_start()  # the guard below takes the signals (the summary is still printed)
     argv = remove_ros_args(args=sys.argv if args is None else args)[1:]
     ap = argparse.ArgumentParser(prog="hyst_loop_node", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=None, help="stop after this many seconds")
@@ -81,15 +85,32 @@ def main(args=None) -> int:
         print("hyst_loop_node: --reference-rate must be within [1, 5000] Hz", file=sys.stderr)
         return 2
 
-    rclpy.init(args=args)
+    # signals as every hyst node takes them (hyst_common.node.run_node): a flag the loop reads, not rclpy's
+    # KeyboardInterrupt inside a callback (a '[FATAL] Exception in callback' on one Ctrl-C in 2 of 7 stops)
+    guard = StopGuard("hyst_loop_node", install=threading.current_thread() is threading.main_thread())
+    try:
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        except RuntimeError as err:  # a bad --ros-args section
+            print(f"hyst_loop_node: error: ROS arguments not understood: {err}", file=sys.stderr)
+            return 2
+        return _run(opts, schedule, guard)
+    finally:
+        guard.close(exiting=args is None)
+
+
+def _run(opts: argparse.Namespace, schedule: list, guard: StopGuard) -> int:
     nodes: list = []
     ctl = None
     t_start = t_end = None
     try:
-        sim = SimNode()
-        ctl = ControllerNode()
-        ref = ReferenceNode()
-        nodes = [sim, ctl, ref]
+        try:  # a parameter out of its range, a missing params file: one line and exit 2, as the nodes alone
+            for make in (SimNode, ControllerNode, ReferenceNode):
+                nodes.append(make())
+        except STARTUP_ERRORS as err:
+            print(f"hyst_loop_node: error: {err}", file=sys.stderr)
+            return 2
+        sim, ctl, ref = nodes
         if sim.get_parameter("mode").value == "realtime":
             ctl.follow(lambda t: ref.sample_at(int(round(t * 1e9)))[0])
             res = ref.set_parameters([Parameter("rate", value=float(opts.reference_rate))])[0]
@@ -97,18 +118,18 @@ def main(args=None) -> int:
                 raise ControlError(res.reason)
         if opts.wait_subscribers > 0:  # e.g. a bag recorder: nothing runs (no timers) until it listens
             until = time.monotonic() + 30.0
-            while time.monotonic() < until and rclpy.ok() and not (
+            while time.monotonic() < until and rclpy.ok() and not guard.stopped and not (
                     ctl.count_subscribers("/stage/state") >= opts.wait_subscribers
                     and ctl.count_subscribers("/stage/command") >= opts.wait_subscribers):
                 time.sleep(0.05)
         ex = _executor()
         for n in nodes:
             ex.add_node(n)
+        guard.phase("spin")
         t_start = time.monotonic()
         clock = _clock(sim, t_start)
         seg, seg_start = -1, 0.0
-        ended = True
-        while rclpy.ok():
+        while rclpy.ok() and not guard.stopped:
             now = clock()
             if schedule and (seg < 0 or _segment_done(ctl, schedule[seg], now - seg_start)):
                 if seg + 1 == len(schedule):
@@ -123,22 +144,23 @@ def main(args=None) -> int:
             if opts.seconds is not None and now >= opts.seconds:
                 break
             ex.spin_once(timeout_sec=0.05)
-        else:
-            ended = False  # the context was shut down under the loop
         t_end = time.monotonic()
-        if ended:  # its own end, not a signal's (a user's Ctrl-C is not kept waiting for a stalled subscriber)
-            _wait_delivered(nodes)
+        # its own end, not a signal's: a user's Ctrl-C is not kept waiting for a stalled subscriber
+        if rclpy.ok() and not guard.stopped:
+            _wait_delivered(nodes, guard)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ControlError, ValueError) as err:
         print(f"hyst_loop_node: {err}", file=sys.stderr)
         return 2
     finally:
+        guard.phase("exit")
         if opts.summary_json and ctl is not None:
             elapsed = ((t_end or time.monotonic()) - t_start) if t_start else 0.0
             sim_counts = dict(nodes[0].counts) if nodes else {}
             print(json.dumps({"tracking": ctl.tracking_summary(), "controller": ctl.counts,
                               "sim": sim_counts, "seconds": elapsed}), flush=True)
+        guard.phase("teardown")
         for n in nodes:
             n.destroy_node()
         rclpy.try_shutdown()
@@ -149,7 +171,7 @@ def main(args=None) -> int:
 DELIVERY_WAIT = 30.0
 
 
-def _wait_delivered(nodes: list) -> None:
+def _wait_delivered(nodes: list, guard: StopGuard) -> None:
     """Wait until every reliable subscriber has acknowledged what the nodes published, at most
     :data:`DELIVERY_WAIT` s in all: a lockstep loop outruns a recorder on a loaded machine, and the samples still in
     the publishers' queues went with the process (a 2 s ``hyst demo --lockstep`` bag held 427 of 4000 states)."""
@@ -157,11 +179,13 @@ def _wait_delivered(nodes: list) -> None:
     until = time.monotonic() + DELIVERY_WAIT
     for n in nodes:
         for pub in list(n.publishers):
-            left = until - time.monotonic()
-            if left <= 0:
+            left = min(until - time.monotonic(), 0.5)  # in slices: a stop signal ends the wait
+            if until - time.monotonic() <= 0 or guard.stopped:
                 return
             try:
-                pub.wait_for_all_acked(Duration(seconds=left))
+                while not pub.wait_for_all_acked(Duration(seconds=left)):
+                    if guard.stopped or time.monotonic() >= until:
+                        return
             except Exception:  # noqa: BLE001 - a publisher already gone or a shut-down context: nothing to wait for
                 pass
 

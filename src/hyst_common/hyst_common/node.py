@@ -230,5 +230,5 @@ def run_node(make: Callable[..., NodeT], args: Sequence[str] | None = None, *, p
                 node.destroy_node()
             rclpy.try_shutdown()
     finally:
-        guard.close()
+        guard.close(exiting=args is None)  # as a console script (sys.argv), the process ends next
     return 0

@@ -83,12 +83,15 @@ class StopGuard:
         if name in ("teardown", "done"):
             self._kick()
 
-    def close(self) -> None:
-        """End the watchdog and restore the previous handlers and wakeup fd (the run is over)."""
+    def close(self, exiting: bool = False) -> None:
+        """End the watchdog and restore the previous handlers and wakeup fd (the run is over).
+
+        ``exiting``: the process ends next (a console script), so a stop signal is ignored from here instead of
+        restored: one arriving while the interpreter exited gave exit code 130 after a clean run."""
         self.phase("done")
         self._thread.join(timeout=5.0)
         for sig, old in self._previous.items():
-            signal.signal(sig, old)  # type: ignore[arg-type]
+            signal.signal(sig, signal.SIG_IGN if exiting else old)  # type: ignore[arg-type]
         if self._old_fd is not None:
             signal.set_wakeup_fd(self._old_fd)
         self._rx.close()
