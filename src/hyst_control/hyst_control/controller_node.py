@@ -307,6 +307,12 @@ class ControllerNode(AtomicParametersNode):
             self.get_logger().warning("reference without a finite position[0] ignored (the last one is held)",
                                       throttle_duration_sec=1.0)
             return
+        why = self._settings.plausible_reference(float(msg.position[0]))
+        if why:  # held as a NaN is, and counted: it must not drive the command to the range's end
+            self._n["bad_refs"] += 1
+            self.get_logger().warning(f"reference ignored, taken for a corrupt sample: {why}",
+                                      throttle_duration_sec=1.0)
+            return
         v = msg.velocity[0] if msg.velocity and math.isfinite(msg.velocity[0]) else 0.0
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         self._ref = (t, _F(msg.position[0]), _F(v))
@@ -438,7 +444,8 @@ class ControllerNode(AtomicParametersNode):
             st.level, st.message = DiagnosticStatus.OK, f"{self._settings.algorithm} running"
         new = {k: self._n[k] - self._n_seen.get(k, 0) for k in ("bad_states", "bad_refs", "unreachable_refs")}
         self._n_seen = dict(self._n)
-        said = {"bad_states": "corrupt or non-finite states ignored", "bad_refs": "non-finite references ignored",
+        said = {"bad_states": "corrupt or non-finite states ignored",
+                "bad_refs": "non-finite or implausible references ignored",
                 "unreachable_refs": "references beyond the stage's travel"}
         if any(new.values()):  # what went wrong since the last report, while it goes on
             st.level = max(st.level, DiagnosticStatus.WARN)

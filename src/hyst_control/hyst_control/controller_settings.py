@@ -77,6 +77,17 @@ class ControllerSettings:
             return f"applied voltage {u:.6g} V is beyond the limits {lim.v_min:g}..{lim.v_max:g} V"
         return ""
 
+    def plausible_reference(self, r: float) -> str:
+        """'' for a reference a user could mean; else why it is taken for corrupt: more than one stroke beyond the
+        travel, as :meth:`plausible` judges states (a 1e300 m reference drove the command to the range's end)."""
+        if self.stroke is not None:
+            lo, hi = self.stroke
+            span = hi - lo
+            if not lo - span <= r <= hi + span:
+                return (f"reference {r:.6g} m is beyond the stage's travel ({lo:.3g}..{hi:.3g} m) by more than its "
+                        "stroke")
+        return ""
+
     def reachable(self, r: float) -> bool:
         """False for a reference beyond the model's rest travel at the limits (the stage cannot hold it)."""
         return self.stroke is None or self.stroke[0] <= r <= self.stroke[1]
@@ -138,11 +149,20 @@ def _reference(spec: str, profile: str, stroke: tuple[float, float] | None,
     if not spec:
         return None
     if profile == "pea":
-        return parse_reference(spec)
-    if stroke is None:
+        ref = parse_reference(spec)
+    elif stroke is None:
         raise ControlError(f"reference {spec!r}: the model has no finite, increasing rest displacement over "
                            f"v_min..v_max ({limits.v_min:g}..{limits.v_max:g} V) to place it on; check the model")
-    return parse_reference(spec, stroke=stroke)
+    else:
+        ref = parse_reference(spec, stroke=stroke)
+    if stroke is not None:  # sine:5:1e300 was taken and drove the commands to the range's ends
+        lo, hi = ref.extent()
+        tol = 0.1 * (stroke[1] - stroke[0])
+        if lo < stroke[0] - tol or hi > stroke[1] + tol:
+            raise ControlError(f"reference {spec!r} spans {lo * 1e6:.4g}..{hi * 1e6:.4g} µm, beyond the model's "
+                               f"travel {stroke[0] * 1e6:.4g}..{stroke[1] * 1e6:.4g} µm at the limits (by more than "
+                               "a tenth of it): the stage cannot follow it")
+    return ref
 
 
 def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> ControllerSettings:

@@ -81,6 +81,13 @@ class Reference:
         if self.frequency < 0:
             raise ReferenceError_("reference frequency must be >= 0")
 
+    def extent(self, seconds: float = 8.0) -> tuple[float, float]:
+        """Lowest and highest r(t) (m) over the first ``seconds`` (every shape repeats or settles within 4 s),
+        sampled finely enough for its fastest component."""
+        n = int(min(max(200.0 * seconds * max(self.frequency, 40.0), 2000.0), 2e6))
+        r = self._eval(np.linspace(0.0, seconds, n))[0]
+        return float(np.min(r)), float(np.max(r))
+
     def __call__(self, t):
         """r(t) in metres (scalar or array)."""
         return self.sample(t)[0]

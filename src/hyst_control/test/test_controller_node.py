@@ -371,7 +371,8 @@ def test_the_watchdog_ramps_to_v_safe_instead_of_jumping(harness):
 
 
 def test_a_reference_beyond_the_travel_is_reported_and_a_profile_range_is_kept(harness):
-    node, peer, ex, pub, got = harness("-p", "reference:=constant:45", "-p", "watchdog_periods:=100000")
+    # 31 µm: beyond the 30 µm travel, within the tenth of it a generated reference may leave it by
+    node, peer, ex, pub, got = harness("-p", "reference:=constant:31", "-p", "watchdog_periods:=100000")
     assert _spin_until(ex, lambda: pub.get_subscription_count() > 0)
     for k in range(3):
         pub.publish(_state(k, 15e-6, 75.0))
@@ -394,3 +395,20 @@ def test_every_parameter_can_be_read_back_as_a_dump_does(harness, tmp_path):
     node, *_ = harness("--params-file", str(p))
     assert node.get_parameter("model.effects").value == [""] and node._settings.effects == ()
     assert len(node.get_parameters(list(node._parameters))) == len(node._parameters)
+
+
+def test_a_reference_far_beyond_the_travel_is_refused_as_a_parameter_and_ignored_as_a_message(harness):
+    """``sine:5:1e300`` was taken and swung the commands between the range's ends; a 1e300 m reference message
+    likewise: now the parameter is refused with the span, and the message counted as corrupt and not followed."""
+    node, peer, ex, pub, got = harness("-p", "watchdog_periods:=100000")
+    res = node.set_parameters([Parameter("reference", value="sine:5:1e300")])[0]
+    assert not res.successful and "beyond the model's travel" in res.reason
+    assert node.set_parameters([Parameter("reference", value="sine:5:12")])[0].successful  # 3..27 µm
+    assert node.set_parameters([Parameter("reference", value="")])[0].successful  # follow the topic
+    ref_pub = peer.create_publisher(JointState, "/stage/reference", 10)
+    assert _spin_until(ex, lambda: ref_pub.get_subscription_count() > 0)
+    m = JointState()
+    m.position = [1e300]
+    ref_pub.publish(m)
+    assert _spin_until(ex, lambda: node.counts["bad_refs"] == 1)
+    assert node._ref is None  # not followed
