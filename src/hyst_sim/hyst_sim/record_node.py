@@ -171,6 +171,15 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     a = ap.parse_args(argv)
     if a.duration is not None and not a.duration > 0:
         ap.error("--duration must be positive")
+    from rclpy.exceptions import InvalidTopicNameException
+    from rclpy.validate_topic_name import validate_topic_name
+    for item in a.topics:  # 'bad-topic' gave a traceback with a type and recorded nothing without one
+        name = item.partition(":")[0]
+        try:
+            validate_topic_name(name)
+        except InvalidTopicNameException:
+            ap.error(f"{name!r} is not a valid ROS topic name (letters, digits, underscores and '/', each part not "
+                     "starting with a digit)")
     return a
 
 

@@ -241,3 +241,13 @@ def test_recorder_keeps_every_sample_and_survives_repeated_signals(tmp_path):
     assert proc.returncode == 0, err_text.decode()
     got = list(read_raw(out))
     assert len(got) == n
+
+
+@pytest.mark.parametrize("topic", ["bad-topic:sensor_msgs/msg/JointState", "bad-topic", "/stage/1state"])
+def test_recorder_refuses_a_topic_name_ros_cannot_use_before_it_starts(tmp_path, topic):
+    """With a type it was a traceback (exit 1); without one it recorded nothing and exited 0."""
+    exe = Path(sys.executable).with_name("hyst_bag_record")
+    proc = subprocess.run([str(exe), topic, "-o", str(tmp_path / "bag"), "--duration", "1"], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 2 and "not a valid ROS topic name" in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "bag").exists()
