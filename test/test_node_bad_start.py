@@ -20,11 +20,12 @@ CASES = [
     ("hyst_driver_node", ["-p", "rate:=-5.0"], "rate"),
     ("hyst_ident_node", ["-p", "poll_period:=-1.0"], "poll_period"),
     ("hyst_ident_node", ["-p", "watch_dir:=/nope/never"], "watch_dir"),
-    ("hyst_residual_node", ["-p", "history:=-1.0"], "history"),
+    ("hyst_residual_node", ["-p", "model.y_scale:=1e-6", "-p", "history:=-1.0"], "history"),
+    ("hyst_residual_node", [], "--params-file"),  # no model given: it would speak model units
 ]
 
 
-@pytest.mark.parametrize("exe,params,name", CASES, ids=[f"{c[0]}-{c[2]}" for c in CASES])
+@pytest.mark.parametrize("exe,params,name", CASES, ids=[f"{c[0]}-{c[2].strip('-')}" for c in CASES])
 def test_bad_start_parameter_is_one_line_and_exit_2(exe, params, name):
     path = shutil.which(exe, path=str(BIN)) or shutil.which(exe)
     assert path, f"{exe} not installed"

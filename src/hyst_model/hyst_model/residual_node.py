@@ -18,6 +18,9 @@ configuration, read like the controller node does) plus
 
 * ``reset_gap`` (s): a jump in the state stamps larger than this (or backwards, e.g. a bag replay restarting)
   restarts the model at rest under the current input;
+* a state whose applied voltage is not finite or beyond twice the model's range is ignored and counted; the
+  counts go to ``/diagnostics`` every second (WARN while states are being ignored); without a params file the
+  node refuses to start (the default model speaks model units);
 * ``history`` (s) and ``batch`` (samples): only for models without a per-sample form (base + effects, PI): the
   model is re-simulated over the last ``history`` seconds every ``batch`` samples and the new samples' predictions
   are published then (stamped with their own state stamps). That is exact while the record is shorter than
@@ -36,6 +39,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from sensor_msgs.msg import JointState
@@ -65,6 +69,9 @@ class ResidualSettings:
     reset_gap: float
     history: float
     batch: int
+    #: A voltage beyond ±this (V) is taken for a corrupt sample and not run: twice the model's full range (its
+    #: fitting convention is ±10 units of ``u_scale``); one 1e4 V sample sent the prediction to −1 cm for 200 samples.
+    u_max: float = math.inf
 
     @property
     def streaming(self) -> bool:
@@ -82,15 +89,22 @@ class ResidualNode(AtomicParametersNode):
     def __init__(self, **kwargs):
         super().__init__("hyst_residual", **kwargs)
         self._model_keys: set[str] = set()
+        if not {"model.u_scale", "model.y_scale"} & set(self._parameter_overrides):
+            # the default model's units are 1 V and 1 m per unit: it predicted 120 m at 75 V
+            raise HystError("no model given: start with the params file whose model to run (--ros-args "
+                            "--params-file stage.yaml, as hyst fit or hyst diagnose --out write it)")
         self._declare()
         self._settings = self._read()
         self._reset()
         self._n = dict.fromkeys(("states", "bad_states", "published", "resets"), 0)
+        self._n_seen = dict(self._n)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         self._pred_pub = self.create_publisher(JointState, "/model/prediction", 100)
         self._res_pub = self.create_publisher(JointState, "/model/residual", 100)
         self.create_subscription(JointState, "/stage/state", self._on_state, 100)
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_timer(1.0, self._publish_diagnostics)
         s = self._settings
         self.get_logger().info(f"residual node ready: model {s.model.name} "
                                f"({'per sample' if s.streaming else f'batches of {s.batch}'})")
@@ -164,6 +178,10 @@ class ResidualNode(AtomicParametersNode):
         if missing:
             raise HystError(f"model {model.name} needs parameters {', '.join(missing)} that were not declared at "
                             "start-up; restart the node with the new params file")
+        words = [n for n in model.names
+                 if n in cfg and (isinstance(cfg[n], bool) or not isinstance(cfg[n], (int, float)))]
+        if words:  # the model keys are dynamically typed (20 for 20.0): a bool or a word was taken as a number
+            raise HystError(f"model.{words[0]} must be a number, not {cfg[words[0]]!r}")
         theta = model.pack({n: float(cfg[n]) for n in model.names})
         if not np.all(np.isfinite(theta)):
             raise HystError("model parameters must be finite")
@@ -175,7 +193,8 @@ class ResidualNode(AtomicParametersNode):
         if not np.all(np.isfinite(probe)) or np.max(np.abs(probe)) > 1e3:
             raise HystError("the model diverges on a full-range test sine with these parameters")
         s = ResidualSettings(model, theta, float(self._get("reset_gap", changes)),
-                             float(self._get("history", changes)), int(self._get("batch", changes)))
+                             float(self._get("history", changes)), int(self._get("batch", changes)),
+                             u_max=2.0 * amp)
         return s
 
     def _on_set(self, params) -> SetParametersResult:
@@ -219,6 +238,11 @@ class ResidualNode(AtomicParametersNode):
         if not msg.effort or not math.isfinite(msg.effort[0]):
             self._n["bad_states"] += 1
             self.get_logger().warning("state without a finite effort[0] ignored", throttle_duration_sec=1.0)
+            return
+        if abs(msg.effort[0]) > self._settings.u_max:
+            self._n["bad_states"] += 1
+            self.get_logger().warning(f"state with effort[0] = {msg.effort[0]:.6g} V ignored: beyond twice the "
+                                      f"model's range (±{self._settings.u_max:.6g} V)", throttle_duration_sec=1.0)
             return
         t = _stamp(msg)
         s = self._settings
@@ -278,6 +302,20 @@ class ResidualNode(AtomicParametersNode):
     @property
     def counts(self) -> dict:
         return dict(self._n)
+
+    def _publish_diagnostics(self) -> None:
+        """Counts on ``/diagnostics`` every second; WARN while states are being ignored."""
+        new_bad = self._n["bad_states"] - self._n_seen["bad_states"]
+        self._n_seen = dict(self._n)
+        st = DiagnosticStatus(name="hyst_residual", hardware_id="stage")
+        st.level = DiagnosticStatus.WARN if new_bad else DiagnosticStatus.OK
+        st.message = (f"{new_bad} state(s) ignored in the last second (non-finite or implausible effort)" if new_bad
+                      else f"model {self._settings.model.name}")
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in self._n.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self._diag_pub.publish(arr)
 
 
 def main(args=None) -> int:

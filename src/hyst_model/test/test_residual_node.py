@@ -8,6 +8,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy")
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -137,6 +138,8 @@ def test_parameters_validated_and_applied(tmp_path, rigs):
     r = n.set_parameters([Parameter("model.base", value="nonsense")])[0]
     assert not r.successful and "nonsense" in r.reason
     assert not n.set_parameters([Parameter("reset_gap", value=-1.0)])[0].successful
+    r = n.set_parameters([Parameter("model.zeta1", value=True)])[0]  # dynamically typed: a bool was taken
+    assert not r.successful and "model.zeta1 must be a number" in r.reason
     # a diverging parameter set is refused with a reason
     r = n.set_parameters_atomically([Parameter("model.psi1", value=-0.5), Parameter("model.alpha1", value=-0.5)])
     assert not r.successful and "diverges" in r.reason
@@ -161,7 +164,12 @@ def test_bad_states_are_ignored_and_gaps_restart(tmp_path, rigs):
     rig.stream(t, u, y)
     rig.send(t[-1] + DT, None, 0.0)  # no effort
     rig.send(t[-1] + 2 * DT, float("nan"), 0.0)
-    assert rig.spin_until(lambda: rig.node.counts["bad_states"] == 2)
+    rig.send(t[-1] + 3 * DT, 1e4, 0.0)  # beyond twice the model's range: sent the prediction to -1 cm
+    assert rig.spin_until(lambda: rig.node.counts["bad_states"] == 3)
+    diags = []
+    rig.tester.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
+    assert rig.spin_until(lambda: any(s.level == DiagnosticStatus.WARN and "3 state(s) ignored" in s.message
+                                      for d in diags for s in d.status), timeout=30.0)
     rig.stream(t + 1.0, u, y)  # one second later: restart at rest -> the same predictions again
     assert rig.spin_until(lambda: len(rig.res) >= 80)
     res = np.array([m.position[0] for m in rig.res])
@@ -171,3 +179,15 @@ def test_bad_states_are_ignored_and_gaps_restart(tmp_path, rigs):
     assert rig.spin_until(lambda: len(rig.pred) >= 81)
     rig.spin_until(lambda: False, timeout=0.1)
     assert len(rig.res) == 80
+
+
+def test_without_a_params_file_the_node_refuses_to_start():
+    """The default model speaks model units (1 V, 1 m per unit): it predicted 120 m at 75 V."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    exe = Path(sys.executable).parent / "hyst_residual_node"
+    p = subprocess.run([str(exe)], capture_output=True, text=True, timeout=120)
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and "--params-file" in err[0], p.stderr
