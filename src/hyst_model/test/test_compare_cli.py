@@ -150,3 +150,16 @@ def test_compare_reads_a_state_bag(tmp_path, capsys):
     assert any("constant offset" in f for f in d["findings"])
     code, _, err = _run(capsys, ["compare", str(bag), "--params", str(params), "--topic", "/nope"])
     assert code == 2 and "Traceback" not in err
+
+
+def test_a_record_at_another_rate_is_refused_unless_asked_as_simulate_does(tmp_path, capsys):
+    """compare only noted what simulate refuses: a per-sample model at twice its rate is another model."""
+    model, theta, params = _model_and_params(tmp_path)
+    t, u = _input()
+    t2 = t[::2] * 1.0  # the same voltages at 500 Hz: every other sample, the time axis kept
+    y = model.simulate(theta, t2, u[::2])
+    csv = write_csv(tmp_path / "slow.csv", {"t": t2, "u": u[::2], "y": y})
+    code, out, err = _run(capsys, ["compare", str(csv), "--params", str(params), "--json"])
+    assert code == 2 and "identified at 1000 Hz" in err and "--any-rate" in err and not out
+    code, out, err = _run(capsys, ["compare", str(csv), "--params", str(params), "--json", "--any-rate"])
+    assert code == 0 and any("do not transfer across sample rates" in n for n in json.loads(out)["notes"])

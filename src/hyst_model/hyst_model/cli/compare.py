@@ -46,6 +46,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="score only samples with T0 <= t < T1 (s); the model still runs over the whole record")
     p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
                    help="Python file with user effects the params file uses (repeatable)")
+    p.add_argument("--any-rate", action="store_true",
+                   help="compare a record sampled at another rate than the model was fitted at (as hyst simulate)")
     p.add_argument("--levels", type=positive_int, default=5, help="number of input-level bins (default 5)")
     p.add_argument("--lags", type=positive_int, default=25, help="lags of the correlation tests (default 25)")
     from .fit import add_data_options
@@ -177,6 +179,10 @@ def run(args: argparse.Namespace) -> int:
     notes = []
     dt_fit = spec.config.get("dt")
     if isinstance(dt_fit, (int, float)) and dt_fit > 0 and abs(rec.dt / dt_fit - 1.0) > 0.02:
+        if not args.any_rate:  # as hyst simulate: the per-sample model's error there is the rate's, not the model's
+            raise DataError(f"{args.data} is sampled at {1 / rec.dt:.6g} Hz but the model was identified at "
+                            f"{1 / dt_fit:.6g} Hz; per-sample models do not transfer across sample rates: refit "
+                            "at this rate, or pass --any-rate to compare anyway")
         notes.append(f"note: the model was fitted at a {dt_fit * 1e3:.4g} ms sample period, this record has "
                      f"{rec.dt * 1e3:.4g} ms; per-sample models do not transfer across sample rates")
     from ..identify.input_range import output_note, range_note
