@@ -105,7 +105,8 @@ def test_a_stray_or_unreadable_state_is_counted_not_answered_and_a_real_pause_is
     from diagnostic_msgs.msg import DiagnosticArray
 
     exc = ExciteNode(context=ctx, parameter_overrides=[Parameter("rate", value=1000.0),
-                                                        Parameter("parts", value="steps"), Parameter("n_steps", value=30)])
+                                                        Parameter("parts", value="steps"),
+                                                        Parameter("n_steps", value=30)])
     sent, diags = [], []
     exc._pub.publish = sent.append
     exc._pub.get_subscription_count = lambda: 1

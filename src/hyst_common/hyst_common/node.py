@@ -152,7 +152,7 @@ def _executor(kind: str):
 
 def run_node(make: Callable[..., NodeT], args: Sequence[str] | None = None, *, prog: str, usage: str = "",
              executor: str = "events", until: Callable[[NodeT], bool] | None = None,
-             on_exit: Callable[[NodeT, bool], None] | None = None,
+             on_exit: Callable[[NodeT, bool], int | None] | None = None,
              errors: tuple[type[BaseException], ...] = (),
              parse: Callable[[list[str]], Any] | None = None) -> int:
     """Run the node ``make()`` until a signal, ``until(node)`` or the context ends; return the exit code.
@@ -174,7 +174,8 @@ def run_node(make: Callable[..., NodeT], args: Sequence[str] | None = None, *, p
     on_exit : callable, optional
         ``on_exit(node, stopped_by_signal)`` before the node is destroyed (flush, finalise a bag, ramp to a safe
         output), on every way out once the node is built — also when a callback raised (the error is then
-        raised again after it, a bug's traceback is worth keeping).
+        raised again after it, a bug's traceback is worth keeping). An int it returns is the exit code (the
+        driver's 3: the safe output was not confirmed).
     errors : tuple of exception types
         Further start-up errors of the node's own package.
     parse : callable, optional
@@ -203,6 +204,7 @@ def run_node(make: Callable[..., NodeT], args: Sequence[str] | None = None, *, p
             print(f"{prog}: error: ROS arguments not understood: {err}", file=sys.stderr)
             return 2
         node: NodeT | None = None
+        exit_code = 0
         try:
             try:
                 node = make(*parsed)
@@ -220,7 +222,8 @@ def run_node(make: Callable[..., NodeT], args: Sequence[str] | None = None, *, p
             finally:  # also when a callback raised: the driver must still ramp to its safe output
                 guard.phase("exit")
                 if on_exit is not None:
-                    on_exit(node, guard.stopped)
+                    code = on_exit(node, guard.stopped)
+                    exit_code = code if isinstance(code, int) and not isinstance(code, bool) else 0
                 guard.phase("teardown")
             ex.remove_node(node)
             ex.shutdown()
@@ -231,4 +234,4 @@ def run_node(make: Callable[..., NodeT], args: Sequence[str] | None = None, *, p
             rclpy.try_shutdown()
     finally:
         guard.close(exiting=args is None)  # as a console script (sys.argv), the process ends next
-    return 0
+    return exit_code

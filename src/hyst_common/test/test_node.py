@@ -215,3 +215,24 @@ def test_runner_calls_on_exit_when_a_callback_raises(executor):
     r = subprocess.run([sys.executable, "-c", FAILING, executor], capture_output=True, text=True, timeout=120)
     assert "on_exit ran, by_signal=False" in r.stdout, (r.stdout, r.stderr)
     assert r.returncode != 0 and "callback bug" in r.stderr
+
+
+FINISHING = r'''
+import sys
+from hyst_common.node import run_node
+from rclpy.node import Node
+
+class Done(Node):
+    def __init__(self):
+        super().__init__("done")
+
+sys.exit(run_node(Done, [sys.argv[0]], prog="done_node", until=lambda n: True,
+                  on_exit=lambda node, by_signal: int(sys.argv[1]) if sys.argv[1] != "none" else None))
+'''
+
+
+@pytest.mark.parametrize("code,expect", [("none", 0), ("0", 0), ("3", 3)])
+def test_an_exit_code_on_exit_returns_is_the_processes(code, expect):
+    """The driver returns 3 when its output was not confirmed at v_safe: exit 0 hid a device left at 100 V."""
+    r = subprocess.run([sys.executable, "-c", FINISHING, code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == expect, r.stderr

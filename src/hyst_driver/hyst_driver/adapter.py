@@ -7,6 +7,7 @@ Bad input never raises out of :meth:`Adapter.feed`: it becomes a :class:`BadFram
 """
 from __future__ import annotations
 
+import re
 from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass
@@ -18,6 +19,9 @@ from .errors import ChecksumError, ConfigError, ProtocolError
 
 __all__ = ["Adapter", "AsciiAdapter", "GcsAdapter", "Reading", "Identified", "DeviceFault", "BadFrame",
            "Acknowledged", "Event", "make_adapter", "PROTOCOLS"]
+
+#: A bare integer line (GCS ``ERR?`` answer): one optional minus sign, digits.
+_INTEGER = re.compile(rb"-?[0-9]+")
 
 
 @dataclass(frozen=True)
@@ -162,7 +166,7 @@ class AsciiAdapter(Adapter):
         if not counts_to_m > 0:
             raise ConfigError(f"counts_to_m must be positive, got {counts_to_m}")
         self.counts_to_m = float(counts_to_m)
-        self._framer = hdb.LineFramer()
+        self._framer = hdb.LineFramer(start=b"$")
         self._last_seq: int | None = None
 
     def identify(self) -> bytes:
@@ -217,7 +221,11 @@ class AsciiAdapter(Adapter):
                     events.append(BadFrame("implausible", f"applied voltage {v} V"))
                     continue
                 if self._last_seq is not None and msg.seq != self._last_seq:  # equal: a re-read (RP), no gap
-                    self.lost_samples += (msg.seq - self._last_seq - 1) % 0x10000
+                    gap = (msg.seq - self._last_seq - 1) % 0x10000
+                    if gap >= 0x8000:  # behind the last one (a late copy), not 65 534 samples lost
+                        events.append(BadFrame("unexpected", f"sample {msg.seq} after {self._last_seq}"))
+                        continue
+                    self.lost_samples += gap
                 self._last_seq = msg.seq
                 events.append(Reading(msg.counts * self.counts_to_m, v, msg.seq, msg.t_us * 1e-6))
             elif isinstance(msg, hdb.Identity):
@@ -338,7 +346,7 @@ class GcsAdapter(Adapter):
 
     def _line(self, line: bytes, events: list[Event]) -> None:
         text = line.strip()
-        if text.lstrip(b"-").isdigit():
+        if _INTEGER.fullmatch(text):  # (lstrip('-').isdigit() let '--5' through to int(): a ValueError out of feed)
             # A bare integer can only answer ERR?: taken in any order (late after a busy spell), because the
             # device cleared its latched error when it answered — dropping it would lose it.
             code = int(text)

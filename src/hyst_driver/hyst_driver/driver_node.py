@@ -157,7 +157,10 @@ class DriverNode(AtomicParametersNode):
         self.add_on_set_parameters_callback(self._on_set)
 
         c = self.cfg
-        lo, hi = (prof.v_min, prof.v_max) if prof else (c.v_min, c.v_max)
+        # read-backs outside the amplifier's range are corrupt lines; a custom stage's amplifier range is not known,
+        # only the command window, which may widen at run time or not hold where the device sits at start (taking
+        # it as the plausible range locked the link out: no handshake, so no ramp down either)
+        lo, hi = (prof.v_min, prof.v_max) if prof else (-CUSTOM_V_MAX, CUSTOM_V_MAX)
         adapter = make_adapter(c.protocol, c.counts_to_m, (lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)))
         self.link = DeviceLink(SerialTransport(c.port, c.baud), adapter, c.limits(), round(c.rate),
                                command_timeout=c.command_timeout, link_timeout=c.link_timeout)
@@ -257,7 +260,19 @@ class DriverNode(AtomicParametersNode):
 
     # ------------------------------------------------------------ diagnostics
     def _publish_diagnostics(self) -> None:
-        self.pub_diag.publish(self.diagnostics(self.link.snapshot()))
+        h = self.link.snapshot()
+        self._log_link(h)
+        self.pub_diag.publish(self.diagnostics(h))
+
+    def _log_link(self, h: LinkHealth) -> None:
+        """A lost and a regained link in the log too (only /diagnostics showed them)."""
+        seen = getattr(self, "_seen_link", (0, 0))
+        if h.disconnects > seen[0]:
+            self.get_logger().warning(f"link to the device lost ({h.last_link_error or 'no reason given'}); "
+                                      "reconnecting, the output held at the device")
+        if h.connects > seen[1] and seen[1] > 0:
+            self.get_logger().info(f"link to the device regained ({h.identity or 'device'})")
+        self._seen_link = (h.disconnects, h.connects)
 
     def diagnostics(self, h: LinkHealth) -> DiagnosticArray:
         """One DiagnosticStatus: ERROR when the link is down or the device reports a severe fault, WARN on
@@ -310,13 +325,19 @@ class DriverNode(AtomicParametersNode):
         return arr
 
 
-def _shutdown(node: "DriverNode", stopped_by_signal: bool) -> None:
-    """On every way out: stop the I/O, ramp the output to ``v_safe`` (confirmed by the read-back), close."""
+#: Exit code when the output could not be confirmed at ``v_safe`` on the way out (the device may hold a voltage).
+EXIT_UNSAFE = 3
+
+
+def _shutdown(node: "DriverNode", stopped_by_signal: bool) -> int:
+    """On every way out: stop the I/O, ramp the output to ``v_safe`` (confirmed by the read-back), close; exit
+    code :data:`EXIT_UNSAFE` when the read-back never confirmed it (exit 0 hid a device left at 100 V)."""
     node.stop_io()
     ok = node.link.ramp_to_safe(max_seconds=_ramp_seconds(node.cfg))
     print(f"hyst_driver_node: {'ramped to' if ok else 'could not confirm'} v_safe = {node.cfg.v_safe} V "
-          f"(link {node.link.health.state})", file=sys.stderr)
+          f"(link {node.link.health.state})" + ("" if ok else "; check the amplifier's output"), file=sys.stderr)
     node.link.close()
+    return 0 if ok else EXIT_UNSAFE
 
 
 def main(args=None) -> int:

@@ -98,9 +98,10 @@ def _make_table() -> tuple[int, ...]:
 
 
 _CRC_TABLE = _make_table()
-_INT = re.compile(rb"^(0|-?[1-9][0-9]*)$")
-_HEX2 = re.compile(rb"^[0-9A-F]{2}$")
-_BODY_OK = re.compile(rb"^[\x20-\x23\x25-\x29\x2b-\x7e]+$")  # printable without '$' (0x24) and '*' (0x2a)
+# \Z, not $: '$' also matches before a trailing newline ('ID\n' framed, '4\n' read as 4)
+_INT = re.compile(rb"^(0|-?[1-9][0-9]*)\Z")
+_HEX2 = re.compile(rb"^[0-9A-F]{2}\Z")
+_BODY_OK = re.compile(rb"^[\x20-\x23\x25-\x29\x2b-\x7e]+\Z")  # printable without '$' (0x24) and '*' (0x2a)
 
 
 def crc8(data: bytes) -> int:
@@ -250,8 +251,10 @@ Reply = Union[Identity, Sample, Ack, ErrorReply]
 # ---------------------------------------------------------------- encoders (host side)
 def volts_to_uv(volts: float) -> int:
     """Volts to wire microvolts, rounded to nearest. Raises :class:`EncodeError` on non-finite or > 999 V."""
-    if not isinstance(volts, (int, float)) or not math.isfinite(volts):
+    if isinstance(volts, bool) or not isinstance(volts, (int, float)) or not math.isfinite(volts):
         raise EncodeError(f"voltage {volts!r} is not a finite number")
+    if abs(volts) >= UV_LIMIT / UV_PER_V + 1.0:  # 1e303 V overflowed in round() before the range test
+        raise EncodeError(f"voltage {volts!r} V does not fit the wire format (|V| < 1000)")
     uv = round(volts * UV_PER_V)
     if abs(uv) > UV_LIMIT:
         raise EncodeError(f"voltage {volts!r} V does not fit the wire format (|V| < 1000)")
@@ -316,8 +319,10 @@ def encode_ack(command: str, *args: str) -> bytes:
 
 def encode_error(code: int, text: str = "") -> bytes:
     """``$ER,<code>,<text>*CC``; ``text`` defaults to :data:`ERROR_CODES` and loses any ``,``."""
+    if isinstance(code, bool) or not isinstance(code, int) or not 0 <= code <= 999:  # what decode_reply accepts
+        raise EncodeError(f"error code {code!r} is not an integer in 0..999")
     text = (text or ERROR_CODES.get(code, "error")).replace(",", ";")
-    return frame(f"ER,{int(code)},{text}")
+    return frame(f"ER,{code},{text}")
 
 
 # ---------------------------------------------------------------- decoders
@@ -373,10 +378,15 @@ class LineFramer:
     ----------
     max_line : int
         Longest line kept (bytes). Longer input is discarded up to the next ``\\n`` and counted.
+    start : bytes, optional
+        A frame's first byte (HDB/1: ``$``): from an overlong line the part from its last ``start`` is kept when it
+        fits — noise without a newline before a good frame cost the frame (72 bytes of it: the frame was dropped
+        with the noise, 69 bytes: kept).
     """
 
-    def __init__(self, max_line: int = MAX_FRAME) -> None:
+    def __init__(self, max_line: int = MAX_FRAME, start: bytes | None = None) -> None:
         self.max_line = int(max_line)
+        self.start = start
         self._buf = bytearray()
         self._skipping = False
         #: Lines dropped because they exceeded ``max_line``.
@@ -390,18 +400,25 @@ class LineFramer:
             i = self._buf.find(b"\n")
             if i < 0:
                 if len(self._buf) > self.max_line:
-                    self._buf.clear()
                     if not self._skipping:
                         self.overlong += 1
-                    self._skipping = True
+                    j = self._buf.rfind(self.start) if self.start else -1
+                    if j > 0 and len(self._buf) - j <= self.max_line:  # a frame after the noise: keep it
+                        del self._buf[:j]
+                        self._skipping = False
+                    else:
+                        self._buf.clear()
+                        self._skipping = True
                 return out
             line = bytes(self._buf[:i]).rstrip(b"\r")
             del self._buf[:i + 1]
-            if self._skipping:
-                self._skipping = False
-                continue
-            if len(line) > self.max_line:
-                self.overlong += 1
+            skipped, self._skipping = self._skipping, False
+            if skipped or len(line) > self.max_line:
+                if not skipped:
+                    self.overlong += 1
+                j = line.rfind(self.start) if self.start else -1
+                if j >= 0 and len(line) - j <= self.max_line:  # the frame that ends this line survives
+                    out.append(line[j:])
                 continue
             out.append(line)
 

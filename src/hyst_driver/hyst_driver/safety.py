@@ -166,6 +166,7 @@ class VoltageLimiter:
         self._k = self._clamp_k(self._to_k(limits.v_safe if v0 is None else v0))
         self._target_k = self._k
         self._safe = False
+        self._ramp_start = False  # a ramp to v_safe was requested and has not stepped yet
         self.counts = LimiterCounts()
         #: True when the last :meth:`step` found no admissible voltage: the caller must not write.
         self.hold = False
@@ -322,8 +323,10 @@ class VoltageLimiter:
         return True
 
     def request_safe(self) -> None:
-        """Target ``v_safe`` (watchdog, shutdown), approached at ``min(slew_max, safe_ramp_rate)``."""
+        """Target ``v_safe`` (watchdog, shutdown), approached at ``min(slew_max, safe_ramp_rate)``; the ramp's
+        first step is credited one sample period at most (the time since the last write was spent holding)."""
         self._target_k = self._clamp_k(round(self._limits.v_safe / self._limits.quantum))
+        self._ramp_start = self._ramp_start or not self._safe
         self._safe = True
 
     def step(self, dt: float) -> float:
@@ -339,7 +342,12 @@ class VoltageLimiter:
         step = lim.slew_max * min(dt, lim.dt_max)  # the hard limit: what the amplifier sees per sample
         # the gentler ramp follows real time (a late write catches up), never above the hard limit
         if self._safe and math.isfinite(lim.safe_ramp_rate):
-            step = min(step, lim.safe_ramp_rate * min(dt, self.RAMP_DT_MAX))
+            # a ramp that starts now has not ramped over the keepalive's 0.1 s before it: that credit made its
+            # first step 10 V at 100 V/s, the steps after it 0.1-0.3 V
+            credit = min(dt, lim.dt_max) if self._ramp_start else min(dt, self.RAMP_DT_MAX)
+            step = min(step, lim.safe_ramp_rate * credit)
+        if dt > 0:
+            self._ramp_start = False
         max_dk = math.floor(step / lim.quantum)
         # The one range-and-slew core (hyst_common.limits) on grid indices: target and output are always in the
         # window here (request, reset and set_limits bring them in), so it is the slew step alone.

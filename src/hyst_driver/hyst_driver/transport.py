@@ -58,6 +58,7 @@ class LinkHealth:
     held: int = 0
     expired: int = 0
     unexplained: int = 0
+    ramp_errors: int = 0  # exceptions while ramping to v_safe at shutdown (the ramp went on)
 
 
 class DeviceLink:
@@ -367,7 +368,12 @@ class DeviceLink:
         self.watchdog.timeout = -1.0  # expired from now on: target is v_safe
         t_end = self.clock() + max_seconds
         while self.clock() < t_end:
-            self.service()
+            try:
+                self.service()
+            except Exception:  # noqa: BLE001 - a fault on the way down must not abort the ramp (device left at 150 V)
+                self.health.ramp_errors += 1
+                sleep(self.period)
+                continue
             h, lim = self.health, self.limiter
             # the target must be v_safe itself: right after closing began, the limiter can still sit settled at
             # the last command (the watchdog's target reaches it on a later write), which once ended the "ramp"

@@ -178,3 +178,12 @@ def test_gcs_garbled_line_while_a_marker_is_out_does_not_wait_for_a_timeout():
     assert ad.poll() == b"*IDN?\nPOS? 1\nVOL? 1\n"
     ev = ad.feed(b"1=1.0\n1=2.0\nhyst,GCS-EMU,1,1\n1=3.0\n1=4.0\n")
     assert _kinds(ev) == ["unexpected", "unexpected", "Identified", "Reading"] and ev[-1].applied_v == 4.0
+
+
+@pytest.mark.parametrize("line", [b"--5\n", b"-\n", b"5-\n", b"-5-\n"])
+def test_gcs_a_malformed_integer_line_is_a_bad_frame_not_an_exception(line):
+    """'--5' passed lstrip('-').isdigit() into int(): a ValueError out of feed, which aborted the shutdown ramp."""
+    ad = _synced_gcs()
+    ev = ad.feed(line)
+    assert all(isinstance(e, BadFrame) for e in ev) and ev
+    assert [type(e) for e in ad.feed(b"-5\n")] == [DeviceFault]  # a real (negative) code still reads

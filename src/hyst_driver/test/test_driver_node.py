@@ -85,6 +85,40 @@ def test_parameters_declared_with_ranges_and_validated_on_set(ctx, emu):
         node.destroy_node()
 
 
+def test_a_custom_window_widened_at_run_time_keeps_the_link(ctx, emu):
+    """With profile custom the read-backs were believed only within the start-up window (0-10 V here): after
+    v_max 50 V every read-back above 11 V was 'implausible', the link dropped and never came back, and the
+    device stayed at 15 V after SIGINT."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hyst_driver.driver_node import DriverNode
+
+    node = DriverNode(context=ctx, parameter_overrides=[
+        Parameter("port", value=emu.link), Parameter("profile", value="custom"), Parameter("v_min", value=0.0),
+        Parameter("v_max", value=10.0)])
+    peer = rclpy.create_node("peer", context=ctx)
+    pub = peer.create_publisher(JointState, "/stage/command", 10)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    ex.add_node(peer)
+    try:
+        assert _spin_until(ex, lambda: node.link.health.state == "running")
+        assert node.set_parameters([Parameter("v_max", value=50.0)])[0].successful
+
+        def at_40() -> bool:
+            pub.publish(JointState(effort=[40.0]))
+            return abs(node.link.health.applied_v - 40.0) < 1e-3
+        assert _spin_until(ex, at_40)
+        assert node.link.health.state == "running" and node.link.health.bad_frames.get("implausible", 0) == 0
+        node.stop_io()
+        assert node.link.ramp_to_safe(5.0)
+    finally:
+        node.stop_io()
+        node.link.close()
+        peer.destroy_node()
+        node.destroy_node()
+
+
 def test_gma_profile_sets_limit_defaults_and_ranges(ctx, tmp_path):
     from hyst_driver.driver_node import DriverNode
 

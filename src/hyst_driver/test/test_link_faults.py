@@ -201,3 +201,23 @@ def test_shutdown_ramp_reports_success_only_once_the_device_applies_v_safe(make_
     assert rig.link.ramp_to_safe(5.0)
     assert rig.link.health.applied_v == pytest.approx(test_limits.v_safe, abs=1e-3)
     assert rig.device.plant.u_applied == pytest.approx(test_limits.v_safe, abs=1e-3)
+
+
+def test_a_fault_while_ramping_down_does_not_abort_the_ramp(make_rig, test_limits):
+    """A line that made the adapter raise during shutdown ended the ramp with a traceback, the device at 150 V."""
+    rig = make_rig("ascii", seed=9, command_timeout=10.0)
+    assert rig.run_until(lambda: rig.link.health.state == "running", DEADLINE, command=False)
+    rig.link.command(80.0)
+    assert rig.run_until(lambda: rig.device.plant.u_applied == 80.0, DEADLINE, command=False)
+    real, calls = rig.link.service, []
+
+    def flaky():
+        calls.append(1)
+        if len(calls) <= 3:
+            raise ValueError("a line the adapter could not take")
+        return real()
+
+    rig.link.service = flaky
+    assert rig.link.ramp_to_safe(5.0)
+    assert rig.link.health.ramp_errors == 3
+    assert rig.device.plant.u_applied == pytest.approx(test_limits.v_safe, abs=1e-3)

@@ -4,6 +4,7 @@ from __future__ import annotations
 import pytest
 
 from hyst_driver import protocol_ascii as p
+from hyst_driver import protocol_ascii as hdb
 from hyst_driver.errors import ChecksumError, EncodeError, ProtocolError
 
 
@@ -140,3 +141,39 @@ def test_line_framer_splits_buffers_and_drops_overlong():
     f.feed(b"$partial")
     f.reset()
     assert f.feed(b"\n$x\n") == [b"", b"$x"]
+
+
+def test_noise_without_a_newline_before_a_frame_costs_only_the_noise():
+    """72+ bytes of noise then a good frame: the frame was dropped with the noise (69 bytes: kept)."""
+    from hyst_driver.adapter import AsciiAdapter, BadFrame, Reading
+
+    good = hdb.encode_sample(hdb.Sample(1, 1000, 5000, 75_000_000))
+    for n in (72, 100, 300):
+        for chunks in ([b"\x01" * n + good], [b"\x01" * n, good], [b"\x01" * n + good[:5], good[5:]]):
+            a = AsciiAdapter()
+            ev = [e for c in chunks for e in a.feed(c)]
+            assert [type(e) for e in ev] == [BadFrame, Reading] and ev[0].kind == "overlong", (n, chunks, ev)
+
+
+def test_encoders_refuse_what_the_decoders_refuse_and_a_newline_is_no_field():
+    with pytest.raises(EncodeError):
+        hdb.volts_to_uv(1e303)   # OverflowError before
+    with pytest.raises(EncodeError):
+        hdb.volts_to_uv(True)    # 1 000 000 µV before
+    for code in (1000, -1):
+        with pytest.raises(EncodeError):
+            hdb.encode_error(code)
+    with pytest.raises((EncodeError, ProtocolError)):
+        hdb.frame("ID\n")        # b'$ID\n*85\r\n' before: one frame the receiver splits in two
+    with pytest.raises(ProtocolError):
+        hdb.decode_reply(b"$P,1,2,3,4\n*3B")
+
+
+def test_a_sample_behind_the_last_is_reported_not_counted_as_65534_lost():
+    from hyst_driver.adapter import AsciiAdapter, BadFrame, Reading
+
+    a = AsciiAdapter()
+    frames = [hdb.encode_sample(hdb.Sample(s, 1000 * s, 5000, 75_000_000)) for s in (10, 11, 10, 12, 14)]
+    ev = [e for f in frames for e in a.feed(f)]
+    assert [type(e) for e in ev] == [Reading, Reading, BadFrame, Reading, Reading] and ev[2].kind == "unexpected"
+    assert a.lost_samples == 1  # 13 only

@@ -296,3 +296,15 @@ def test_apply_delay_is_measured_by_the_read_back_and_only_when_the_sample_time_
     lz.sent(0.020)
     lz.observe(40.0, -math.inf)         # sample time unknown (a polled reply before the clock settled)
     assert len(lz.apply_delays) == 1 and lz.confirmed == 40.0
+
+
+def test_a_ramp_to_safe_starts_with_one_periods_step_not_the_keepalives_credit():
+    """The first step of a watchdog ramp was credited the 0.1 s since the keepalive write: 100 V → 90 V at
+    100 V/s, then 0.1-0.3 V per sample."""
+    lim = Limits(0.0, 150.0, slew_max=1e5, v_safe=0.0, safe_ramp_rate=100.0, dt_max=1e-3)
+    lz = VoltageLimiter(lim, v0=100.0, track_flight=False)
+    lz.request_safe()
+    assert lz.step(0.1) == pytest.approx(99.9)          # one period at 100 V/s, though 0.1 s went by
+    assert lz.step(0.1) == pytest.approx(89.9)          # once ramping, a late write catches up (as before)
+    lz.request_safe()                                    # asked again while ramping: no new start
+    assert lz.step(0.05) == pytest.approx(84.9)
