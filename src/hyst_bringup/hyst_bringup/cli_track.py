@@ -36,7 +36,7 @@ from hyst_control.controllers import ALGORITHMS, CONTROLLERS, make_controller, m
 from hyst_common.argtypes import nonneg_int
 from hyst_common.errors import ConfigError as CommonConfigError
 from hyst_common.limits import CommandLimits
-from hyst_common.profiles import PEA_LIMITS, custom_base, custom_limits
+from hyst_common.profiles import PEA_LIMITS, custom_base, custom_limits, same_rate
 from hyst_control.errors import ConfigError
 from hyst_control.pid import gains_for
 from hyst_control.reference import parse_reference
@@ -146,7 +146,7 @@ def _read_params(path: str):
 def _params_model(spec, path: str, rate: float):
     """Base MBW and compensation of a params file; its ``dt`` must match the loop rate."""
     mdt = spec.config.get("dt")
-    if mdt and abs(float(mdt) * rate - 1.0) > 1e-6:
+    if mdt and not same_rate(float(mdt), rate):
         raise ConfigError(f"{path} was identified at dt = {float(mdt):g} s: run with --rate {1.0 / float(mdt):g} "
                           "(the MBW recursion is per sample)")
     model, comp = from_params(spec, 1.0 / rate)

@@ -10,7 +10,7 @@ from functools import lru_cache
 from typing import Any
 
 from hyst_common.limits import CommandLimits
-from hyst_common.profiles import check_range
+from hyst_common.profiles import check_range, same_rate
 from hyst_model.core import PARAM_NAMES, MBWParams, pea_default, stage_model
 from hyst_model.core.bounded import mbw_bounded
 
@@ -180,7 +180,7 @@ def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> Co
     if str(get("model.base")) != "mbw":
         raise ControlError("the controllers invert the MBW model: model.base must be 'mbw'")
     mdt, rate = f(get("model.dt")), f(get("rate"))
-    if mdt > 0 and abs(mdt * rate - 1.0) > 1e-6:
+    if mdt > 0 and not same_rate(mdt, rate):
         raise ControlError(f"the model was identified at dt = {mdt:g} s but rate = {rate:g} Hz: the MBW recursion "
                            f"is per sample, so set rate:={1.0 / mdt:g} (or refit the model at this rate)")
     profile = str(get("profile")).strip().lower()

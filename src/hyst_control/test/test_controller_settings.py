@@ -42,6 +42,14 @@ def test_a_parameter_set_the_laws_cannot_run_is_refused_with_its_reason(over, wh
         read_settings(_params(**over), ())
 
 
+def test_a_model_period_a_clocks_error_off_the_loops_runs_and_a_rate_apart_does_not():
+    """hyst fit writes the record's median period: 1.00002 ms (a 20 ppm clock) was refused at 1 kHz."""
+    assert read_settings(_params(model__dt=1.00002e-3), ()).rate == 1000.0
+    assert read_settings(_params(model__dt=1.000656e-3), ()).rate == 1000.0
+    with pytest.raises(ControlError, match="set rate:="):
+        read_settings(_params(model__dt=1.01e-3), ())
+
+
 def test_an_internal_reference_sits_on_the_stroke_of_the_profile_model():
     """sine:5 is 5–25 µm on the PEA (as documented); on the GMA (±20 µm) it was placed there too and half of it was
     out of reach: another profile's reference now sits on its model's rest stroke as the sine sits on the PEA's."""

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyst_common.profiles import get_profile
+from hyst_common.profiles import RATE_TOLERANCE, get_profile
 from hyst_model.core import MBWParams, stage_model
 
 from .errors import ConfigError
@@ -153,7 +153,7 @@ def substeps_for(dt: float, model_dt: float) -> int:
     """MBW recursions per plant sample for a model identified at ``model_dt`` (s); refuses non-integer ratios."""
     ratio = dt / model_dt
     n = int(round(ratio))
-    if n < 1 or abs(ratio - n) > 1e-6 * max(1.0, ratio):
+    if n < 1 or abs(ratio - n) > RATE_TOLERANCE * max(1.0, ratio):  # a measured period carries the clock's error
         raise ConfigError(f"the model was identified at dt = {model_dt:g} s; the plant period {dt:g} s must be an "
                           f"integer multiple of it (rate <= {1.0 / model_dt:g} Hz, e.g. {1.0 / model_dt:g} or "
                           f"{0.5 / model_dt:g} Hz)")
