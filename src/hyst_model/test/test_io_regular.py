@@ -134,3 +134,23 @@ def test_a_step_just_over_the_limit_of_the_kept_segment_is_bridged_too():
     out.check()
     assert out.t[0] == b[0] and len(out) == b.size + 1, notes     # the sine segment kept, one sample put back
     assert len(out.meta["bridged"]) == 1 and out.u[out.meta["bridged"][0]] == u[a.size + 2500], notes
+
+
+def test_two_runs_stamped_alike_are_refused_not_spliced():
+    """A recorder kept across a restart of the lockstep stage holds two runs stamped from 0: sorted by stamp they
+    were spliced into one record (66 nm where each run fits at 2 nm) with only a note about repeated stamps."""
+    from hyst_model.io.bag import _one_run
+
+    t, u, y = _stage(600)
+    t2, u2, y2 = _stage(400, seed=1)
+    both = np.r_[t, t2[:300]]
+    order = np.argsort(both, kind="stable")  # what sorting by stamp makes of them
+    r = Record(both[order], np.r_[u, u2[:300]][order], np.r_[y + 1e-7, y2[:300]][order])
+    with pytest.raises(DataError, match="300 samples share their time stamp with another of different values"):
+        regularise(r)
+    ns = (np.r_[t, t2] * 1e9).astype(np.int64) + 1_700_000_000_000_000_000  # in the order a recorder got them
+    with pytest.raises(DataError, match="start over at message 601 of 1000"):
+        _one_run("bag", "/stage/state", ns)
+    swapped = ns[:600].copy()
+    swapped[[10, 11]] = swapped[[11, 10]]  # one run with delivery reordering: sorted, not refused
+    _one_run("bag", "/stage/state", swapped)

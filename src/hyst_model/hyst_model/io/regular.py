@@ -42,6 +42,10 @@ def _collapse_repeats(rec: Record, notes: list[str]) -> Record:
     keep = np.ones(len(rec), dtype=bool)
     keep[rep] = False            # of a run of equal stamps keep the last copy
     differ = int(np.sum((rec.u[rep] != rec.u[rep + 1]) | (rec.y[rep] != rec.y[rep + 1])))
+    if differ > max(10, 0.01 * len(rec)):  # copies of a re-sent sample are identical; this many are not copies
+        raise DataError(f"{rec.source}: {differ} samples share their time stamp with another of different values: "
+                        "two runs stamped alike in one record (a recorder kept across a restart of the stage?) or "
+                        "corrupt stamps; record each run on its own")
     what = f"; {differ} of them with different values (kept the newest)" if differ else " (identical copies)"
     notes.append(f"collapsed {rep.size} repeated time stamp(s){what}")
     out = Record(rec.t[keep], rec.u[keep], rec.y[keep], dict(rec.meta))
