@@ -133,14 +133,22 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     # Lockstep bags repeat sample 0, realtime bags miss periods: made regular as `hyst fit --gaps` does.
     rec, notes = regularise(read_state_bag(path, cfg.topic), cfg.gaps)
     rec.check()
-    split = cfg.val_fraction if cfg.val_fraction > 0 else None
+    split = None
+    if cfg.val_fraction > 0:  # the hold-out hyst fit and hyst diagnose use: interleaved blocks, not the tail
+        from .diagnose.diagnose import BLOCKS  # (the tail after an excitation is rest: 2.6 nm there, 76 nm in blocks)
+        from .identify import block_mask
+        split = block_mask(len(rec), cfg.val_fraction, BLOCKS, rec.u)
     config = dict(data_config(rec.u, rec.y), dt=rec.dt)
     if cfg.effects:  # each effect's settings from the samples the fit scores, then the user's: as hyst fit does
         from .spec import effect_settings, parse_effect_config
         config.update(effect_settings(cfg.effects, rec.t, rec.u, rec.y, split))
         config.update(parse_effect_config(cfg.effect_config, cfg.effects, names=_NAMES))  # checked when it was set
     model = build_model(cfg.model, cfg.effects, config)
-    res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if cfg.seed < 0 else cfg.seed, split=split)
+    seed = cfg.seed
+    if seed < 0 and METHODS[cfg.method].seeded:  # drawn and kept in the summary: the fit can be repeated
+        import secrets
+        seed = secrets.randbelow(2 ** 31)
+    res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if seed < 0 else seed, split=split)
     constrained = None
     if cfg.admissible:  # as hyst fit --admissible: Remark 4.1 and passive rate terms, at a stated cost
         con = constrain(model, rec.t, rec.u, rec.y, res.theta, split)
@@ -153,6 +161,7 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     summary = {"bag": str(path), "model": cfg.model, "effects": list(cfg.effects), "method": cfg.method,
                "rmse": res.rmse, "rmse_train": res.rmse_train, "seconds": res.seconds, "samples": len(rec),
                "params": res.params, "dt": rec.dt, "data_notes": notes, **identified_range(rec.u, rec.y),
+               "split": res.split, **({"seed": seed} if seed >= 0 else {}),
                "admissibility": adm.to_json(), "constrained": constrained}
     return summary, model, res, rec.dt
 
@@ -237,7 +246,8 @@ class IdentNode(AtomicParametersNode):
         d("method", "fast", ParameterDescriptor(description="identifier: " + " | ".join(METHODS)))
         d("seed", -1, ParameterDescriptor(description="random seed for epso (-1 = random)",
                                           integer_range=int_range(-1, 2**31 - 1)))
-        d("val_fraction", 0.25, ParameterDescriptor(description="held-out tail of each bag for validation (0 = none)",
+        d("val_fraction", 0.25, ParameterDescriptor(description="held-out share of each bag for validation, in "
+                                                    "interleaved blocks as hyst fit (0 = none)",
                                                     floating_point_range=fp_range(0.0, 0.9)))
         d("params_file", "", ParameterDescriptor(description="params file to write after each fit ('' = none)"))
         d("overwrite", False, ParameterDescriptor(
@@ -352,8 +362,14 @@ class IdentNode(AtomicParametersNode):
             from .io import spec_from_model, write_params
             target = os.path.abspath(cfg.params_file)
             force = cfg.overwrite or target in self._written_by_me
+            # the provenance hyst fit --out writes (the notes on the bag, the split, the identified ranges, what
+            # the controllers can do with it)
             prov = {"method": cfg.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": summary["bag"],
-                    **{k: summary[k] for k in ("u_min", "u_max") if k in summary}}
+                    "split": res.split, "seconds": round(res.seconds, 3), "samples": summary["samples"],
+                    **({"data_notes": "; ".join(summary["data_notes"])} if summary.get("data_notes") else {}),
+                    **({"seed": summary["seed"]} if "seed" in summary else {}),
+                    **({"controllers": adm["controllers"]} if adm.get("controllers") else {}),
+                    **{k: summary[k] for k in ("u_min", "u_max", "y_min", "y_max") if k in summary}}
             try:
                 write_params(target, spec_from_model(model, res.theta, fit=prov, dt=dt), force=force)
                 self._written_by_me.add(target)
@@ -377,6 +393,11 @@ class IdentNode(AtomicParametersNode):
             self._client = AsyncParameterClient(self, cfg.controller_node)
             self._client_name = cfg.controller_node
         summary["push"] = "pending"
+        if self._pending is not None:  # the newest model goes; the one it replaces is said, not dropped silently
+            old = self._pending[2]
+            self.get_logger().warning(f"{old}: not pushed, superseded by {summary['bag']} before "
+                                      f"{self._client_name} could be reached")
+            self._publish({"bag": old, "push": f"superseded by {summary['bag']}"})
         self._pending = (params, self._now() + cfg.push_timeout, summary["bag"])
         self._try_push()
 

@@ -226,7 +226,9 @@ def test_effect_configuration_and_the_records_own_settings_reach_the_fit(tmp_pat
     plain, _, res_p, _ = fit_bag(str(bag), IdentConfig(effects=("creep",)))
     lags, model, res_l, _ = fit_bag(str(bag), IdentConfig(effects=("creep",), effect_config=("creep.form=lags",)))
     creep = model.effects[0]
-    assert creep.form == "lags" and creep.tau_max == pytest.approx(0.75 * t[-1] / 3.0, rel=1e-3)
+    # a third of the span the fit scores: the whole record, as hyst fit's interleaved hold-out (not a tail)
+    assert creep.form == "lags" and creep.tau_max == pytest.approx(t[-1] / 3.0, rel=1e-3)
+    assert "interleaved blocks" in lags["split"]
     assert sorted((lags["params"]["creep.tau1"], lags["params"]["creep.tau2"])) == [
         pytest.approx(0.1, rel=0.3), pytest.approx(1.5, rel=0.3)], lags["params"]
     assert res_l.rmse < 0.5 * res_p.rmse, (res_l.rmse, res_p.rmse)
@@ -259,3 +261,26 @@ def test_a_controller_node_name_ros_cannot_use_is_refused_when_set(name):
     with pytest.raises(ValueError, match="not a valid ROS node name"):
         IdentConfig(controller_node=name).validate()
     assert IdentConfig(controller_node="/ns/hyst_controller").validate().controller_node == "/ns/hyst_controller"
+
+
+def test_a_push_still_waiting_is_reported_when_a_newer_model_supersedes_it(tmp_path, ctx):
+    """The second fit replaced the first one's pending push without a word (its push stayed 'pending')."""
+    bags = [str(_bag(tmp_path / f"run{k}", seed=k)) for k in (1, 2)]
+    out = tmp_path / "model.yaml"
+    node = IdentNode(context=ctx, parameter_overrides=[
+        Parameter("bags", Parameter.Type.STRING_ARRAY, bags), Parameter("params_file", Parameter.Type.STRING, str(out)),
+        Parameter("overwrite", Parameter.Type.BOOL, True),
+        Parameter("controller_node", Parameter.Type.STRING, "/absent_ctrl"),
+        Parameter("push_timeout", Parameter.Type.DOUBLE, 600.0)])
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        assert _spin_until(ex, lambda: any(r.get("push", "").startswith("superseded") for r in node.results))
+        gone = next(r for r in node.results if r.get("push", "").startswith("superseded"))
+        assert gone == {"bag": bags[0], "push": f"superseded by {bags[1]}"}
+        fit = read_params(out).fit  # the provenance hyst fit --out writes
+        assert fit["data"] == bags[1] and "interleaved blocks" in fit["split"] and fit["samples"] == 2000
+        assert {"y_min", "y_max", "u_min", "u_max", "controllers"} <= set(fit)
+    finally:
+        ex.shutdown()
+        node.destroy_node()

@@ -169,6 +169,11 @@ def run(args) -> int:
         if args.method != "epso":
             raise HystError("--iterations applies to --method epso only")
         options["iterations"] = args.iterations
+    if args.seed is None and METHODS[args.method].seeded:  # drawn, then said and kept: a fit can be repeated
+        import secrets
+        args.seed = secrets.randbelow(2 ** 31)
+        if not args.quiet:
+            print(f"hyst fit: {args.method} seed {args.seed} (--seed {args.seed} repeats this fit)", file=sys.stderr)
     res = fit(model, rec.t, rec.u, rec.y, method=args.method, seed=args.seed, split=split,
               progress=not args.quiet, **options)
     from ..identify.admissible import check_admissible
