@@ -102,6 +102,16 @@ def test_hyst_fit_reads_a_lockstep_bag_with_missed_periods_as_it_is(tmp_path, ca
     assert obj["rmse"] < 20e-9                      # the noise is 2 nm: the bridge did not spoil the fit
     assert main(["fit", str(bag), "--gaps", "refuse", "--quiet"]) == 2
     assert "--gaps auto" in capsys.readouterr().err
+    # diagnose and compare keep the notes too (they only printed them): JSON and params file alike
+    assert main(["fit", str(bag), "--quiet", "--out", str(tmp_path / "fit.yaml")]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(bag), "--params", str(tmp_path / "fit.yaml"), "--json"]) == 0
+    assert any("bridged 1 gap(s)" in n for n in json.loads(capsys.readouterr().out)["data_notes"])
+    assert main(["diagnose", str(bag), "--json", "--effects", "delay", "--out", str(tmp_path / "d.yaml")]) in (0, 3)
+    assert any("collapsed 3" in n for n in json.loads(capsys.readouterr().out)["data_notes"])
+    from hyst_model.io import read_params
+    prov = read_params(tmp_path / "d.yaml").fit
+    assert "collapsed 3" in prov["data_notes"] and prov["samples"] == 4000 and "interleaved" in prov["split"]
 
 
 def test_auto_keeps_the_segment_with_the_excitation_not_the_longer_rest_after_it():

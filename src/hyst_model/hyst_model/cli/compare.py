@@ -202,6 +202,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         d = {"data": rec.source, "params": str(args.params), "model": getattr(model, "name", "?"),
              **st.to_dict(), "findings": findings(st), "notes": notes,
+             "data_notes": list(rec.meta.get("regularised", [])),
              "report": str(report_dir / "index.html") if report_dir else None}
         print(json.dumps(_clean(d), allow_nan=False))
     else:

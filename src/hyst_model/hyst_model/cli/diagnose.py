@@ -150,7 +150,13 @@ def run(args: argparse.Namespace) -> int:
         from ..io import spec_from_model, write_params
         model, theta = fm, fth
         from ..identify.input_range import identified_range
+        from ..diagnose.diagnose import BLOCKS, SPLIT
+        # the provenance hyst fit --out writes: the notes on the record, the hold-out, the samples
         prov = {"method": "diagnose", "rmse": rmse_v, "rmse_train": rmse_t, "data": str(args.data),
+                "split": f"train on {1 - SPLIT:.0%} of the samples, validate on {SPLIT:.0%} in {BLOCKS} interleaved "
+                         "blocks, free-run from rest at the record start",
+                "seconds": round(d.seconds, 3), "samples": len(rec),
+                **({"data_notes": "; ".join(rec.meta["regularised"])} if rec.meta.get("regularised") else {}),
                 "controllers": adm.controllers, **identified_range(rec.u, rec.y)}
         if constrained:
             from ..identify.admissible import provenance
@@ -175,6 +181,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         obj = _clean(d.to_json())
         obj["data"] = rec.source
+        obj["data_notes"] = list(rec.meta.get("regularised", []))  # what was done to the record, as hyst fit's
         obj["report"] = report_path
         obj["params_file"] = out_path
         obj["admissibility"] = _clean(adm.to_json())
