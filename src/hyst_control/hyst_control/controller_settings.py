@@ -165,6 +165,23 @@ def _reference(spec: str, profile: str, stroke: tuple[float, float] | None,
     return ref
 
 
+#: A model is refused for limits reaching more than this many times the largest voltage it was identified at.
+REACH_FACTOR = 10.0
+
+
+def _same_actuator(model: MBWParams, limits: CommandLimits) -> None:
+    """Refuse a model identified on a far smaller voltage range than the limits drive: another actuator's (a GMA
+    model fitted on −4.8…1.4 V ran DPPC on the PEA's 0–150 V with only a divergence warning). ``u_scale`` is the
+    largest |u| of the identification record over 10 model units (:func:`hyst_model.models.data_config`)."""
+    reach = max(abs(limits.v_min), abs(limits.v_max))
+    ident = 10.0 * model.u_scale
+    if ident > 0 and reach > REACH_FACTOR * ident:
+        raise ControlError(f"the model was identified up to about {ident:.3g} V (u_scale {model.u_scale:g} V per "
+                           f"unit) but the limits reach {reach:g} V, {reach / ident:.0f}× beyond it: a model of "
+                           "another actuator or range? Identify on the range the controller drives, or narrow "
+                           "v_min/v_max")
+
+
 def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> ControllerSettings:
     """The settings the node's parameters give, every check made; ``get(name)`` is a parameter's value.
 
@@ -197,6 +214,7 @@ def read_settings(get: Callable[[str], Any], effect_keys: tuple[str, ...]) -> Co
         raise ControlError(f"stability.policy must be one of {', '.join(POLICIES)}, got {policy!r}")
     comp = plan_compensation(model, effects, dict(evals), dict(evals), 1.0 / rate)
     limits = CommandLimits(f(get("v_min")), f(get("v_max")), f(get("slew_max")), f(get("v_safe")))
+    _same_actuator(model, limits)
     divergence = model_divergence(alg, model, comp, limits, 1.0 / rate)  # ControlError: refused
     stroke = model.rest_range(limits.v_min, limits.v_max)  # the reach, and the plausible readings
     # checked as the compensation will run it (a mode it inverts is left only as a model error)

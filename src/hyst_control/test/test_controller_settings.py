@@ -50,6 +50,13 @@ def test_a_model_period_a_clocks_error_off_the_loops_runs_and_a_rate_apart_does_
         read_settings(_params(model__dt=1.01e-3), ())
 
 
+def test_a_model_identified_far_below_the_limits_reach_is_refused_as_another_actuators():
+    """A GMA model fitted on −4.8…1.4 V (u_scale 0.48 V per unit) ran DPPC on the PEA's 0–150 V with a warning."""
+    with pytest.raises(ControlError, match="another actuator"):
+        read_settings(_params(model__u_scale=0.48), ())
+    assert read_settings(_params(model__u_scale=1.5), ()).model.u_scale == 1.5  # 15 V of 150: 10×, still taken
+
+
 def test_an_internal_reference_sits_on_the_stroke_of_the_profile_model():
     """sine:5 is 5–25 µm on the PEA (as documented); on the GMA (±20 µm) it was placed there too and half of it was
     out of reach: another profile's reference now sits on its model's rest stroke as the sine sits on the PEA's."""
