@@ -66,7 +66,7 @@ def test_two_modes_round_trip_through_a_params_file(tmp_path):
     th = m.theta0.copy()
     th[m.names.index("dynamics.fn2")] = 640.0
     p = tmp_path / "two.yaml"
-    write_params(p, spec_from_model(m, th))
+    write_params(p, spec_from_model(m, th, dt=DT))  # as hyst fit writes it (without dt: read at 1 kHz, refused)
     spec = read_params(p)
     assert float(spec.config["dynamics.modes"]) == 2.0 and spec.values["dynamics.fn2"] == pytest.approx(640.0)
     m2 = spec.model()

@@ -273,7 +273,7 @@ def read_params(path: str | Path) -> ParamsSpec:
     bad = [k for k, v in spec.values.items() if not np.isfinite(v)]
     if bad:
         raise ParamsError(f"{path}: non-finite value for {', '.join(bad)}")
-    _check_ranges(path, m, spec.theta(m))  # every parameter present, each within its range
+    _check_ranges(path, m, spec.theta(m), "dt" in spec.config)  # every parameter present, each within its range
     # A missing scale silently became 1.0 (a −6 cm output); a non-positive dt breaks every per-sample model.
     needed = [k for k in ("u_scale", "y_scale") if k in m.config() and k not in spec.config]
     if needed:
@@ -286,12 +286,14 @@ def read_params(path: str | Path) -> ParamsSpec:
     return spec
 
 
-def _check_ranges(path: Path, m: Model, theta: np.ndarray) -> None:
+def _check_ranges(path: Path, m: Model, theta: np.ndarray, has_dt: bool = True) -> None:
     """Refuse a value outside the range its parameter is defined on (:attr:`Model.bounds`, where the fitters search
     and the checks hold): a hand-written ``delay.tau: -0.5`` ran as no delay, ``creep.tilt: 42`` without a word."""
     lo, hi = m.bounds
     for p, v, a, b in zip(m.params(), theta, lo, hi):
         if not a <= v <= b:
             unit = f" {p.unit}" if p.unit else ""
+            hint = "" if has_dt else (" (the file gives no model.dt, so it is read at 1 kHz: add the period it was "
+                                      "fitted at)")
             raise ParamsError(f"{path}: model.{p.name} = {v:g}{unit} lies outside its range [{a:g}, {b:g}]{unit}; "
-                              "correct it or refit")
+                              f"correct it or refit{hint}")
