@@ -84,7 +84,8 @@ def _open_reader(path: Path):
     except DataError:
         raise
     except Exception as err:  # rosbags raises several types for damaged bags; all mean "unreadable"
-        raise DataError(f"{path}: cannot open bag ({type(err).__name__}: {err}); is it complete?") from err
+        raise DataError(f"{path}: cannot open bag ({type(err).__name__}: {err}); is it complete? (a recorder "
+                        "stopped without finishing it: --salvage reads what it wrote)") from err
     return reader
 
 
