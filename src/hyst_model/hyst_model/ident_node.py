@@ -166,6 +166,23 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     return summary, model, res, rec.dt
 
 
+#: The command line's options in the shared readers' messages, as this node's parameters.
+_OPTION_AS_PARAMETER = ((r"--gaps (\w+)", r"gaps:=\1"), (r"--gaps\b", "the gaps parameter"),
+                        (r"--topic (\S+)", r"topic:=\1"), (r"--topic\b", "the topic parameter"),
+                        (r"--force\b", "overwrite:=true"))
+
+
+def _as_parameters(message: str, bag: str) -> str:
+    """A reader's error in this node's terms: its parameters for the CLI's options, the bag named once."""
+    import re
+    for opt, par in _OPTION_AS_PARAMETER:
+        message = re.sub(opt, par, message)
+    for prefix in (f"{bag}: ", f"{os.path.abspath(bag)}: "):
+        if message.startswith(prefix):
+            message = message[len(prefix):]
+    return message
+
+
 def controller_parameters(model, theta, dt: float) -> list[Parameter]:
     """``model.*`` parameters the controller node declares: the MBW (BW is MBW with zero rate terms), the scales,
     ``model.dt`` and, for a model with effects, ``model.effects`` with every effect parameter and configuration key
@@ -337,8 +354,9 @@ class IdentNode(AtomicParametersNode):
             try:
                 summary, model, res, dt = job.result()
             except HystError as err:
-                self.get_logger().error(f"{bag}: {err}")
-                self._publish({"bag": bag, "error": str(err)})
+                why = _as_parameters(str(err), bag)
+                self.get_logger().error(f"{bag}: {why}")
+                self._publish({"bag": bag, "error": why})
                 return
             except Exception as err:  # noqa: BLE001 - a broken bag or model must not take the node down
                 self.get_logger().error(f"{bag}: fit failed ({type(err).__name__}: {err})")

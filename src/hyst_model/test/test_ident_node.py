@@ -284,3 +284,12 @@ def test_a_push_still_waiting_is_reported_when_a_newer_model_supersedes_it(tmp_p
     finally:
         ex.shutdown()
         node.destroy_node()
+
+
+def test_a_readers_error_speaks_of_the_nodes_parameters_and_names_the_bag_once():
+    """The shared readers speak of hyst fit's options (--gaps, --topic, --force) and name the bag first; the node
+    logged them as they were, after its own bag name."""
+    from hyst_model.ident_node import _as_parameters
+
+    msg = "bags/x: time stamps repeat; use --gaps auto, pass --topic /other or --force"
+    assert _as_parameters(msg, "bags/x") == "time stamps repeat; use gaps:=auto, pass topic:=/other or overwrite:=true"
