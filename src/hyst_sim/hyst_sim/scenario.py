@@ -24,6 +24,7 @@ and returns its MBW part with SI scaling.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import NamedTuple
@@ -76,6 +77,33 @@ class Scenario:
                 from None
 
 
+#: A number as YAML 1.2 reads it, which PyYAML's YAML 1.1 leaves a string without a decimal point (``4e-9``).
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+
+def _typed(p: Path, cls, settings: dict) -> dict:
+    """Each setting as its field's type: a finite number for a number (``4e-9`` as YAML 1.1 leaves it, a whole
+    ``3.0`` for an integer), true/false for a flag. ``sine: .inf`` loaded and put the reading at −1.8e10 m,
+    ``two_sided: 'no'`` meant two-sided and ``dynamics: true`` a 1 Hz resonance."""
+    types = {f.name: str(f.type) for f in fields(cls)}
+    out = {}
+    for k, v in settings.items():
+        kind = types.get(k, "float")
+        if isinstance(v, str) and _NUMBER.fullmatch(v.strip()):
+            v = float(v)
+        if "bool" in kind:
+            if v is not None and not isinstance(v, bool):
+                raise ScenarioError(f"{p}: an effect's flag is not true or false")  # names no setting: hidden
+        elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ScenarioError(f"{p}: an effect setting is not a finite number")
+        elif "int" in kind and "float" not in kind:
+            if v != int(v):
+                raise ScenarioError(f"{p}: an effect's count is not a whole number")
+            v = int(v)
+        out[k] = v
+    return out
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario file; see the module docstring for the format.
 
@@ -111,6 +139,7 @@ def load_scenario(path: str | Path) -> Scenario:
         allowed = {f.name for f in fields(cls)}
         if set(settings) - allowed:
             raise ScenarioError(f"{p}: an effect has an unknown setting (allowed per effect: see truth_effects)")
+        settings = _typed(p, cls, settings)
         try:
             eff = cls(**settings)
             eff.validate()
@@ -119,10 +148,11 @@ def load_scenario(path: str | Path) -> Scenario:
         effects.append((name, eff))
     factors = doc.get("mbw_factors") or {}
     if not isinstance(factors, dict) or set(factors) - set(PARAM_NAMES) or not all(
-            isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in factors.values()):
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+            for v in factors.values()):
         raise ScenarioError(f"{p}: 'mbw_factors' must map MBW parameter names to positive finite numbers")
     seed = doc.get("seed")
-    if seed is not None and not (isinstance(seed, int) and seed >= 0):
+    if seed is not None and not (isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0):
         raise ScenarioError(f"{p}: 'seed' must be a non-negative integer")
     return Scenario(tuple(effects), tuple((str(k), float(v)) for k, v in factors.items()), seed, str(p))
 

@@ -51,6 +51,13 @@ def test_scenario_overrides_named_effects_and_applies_mismatch_and_seed(tmp_path
     assert cfg.mbw.zeta1 == pytest.approx(1.2 * pea_default().zeta1) and cfg.seed == 9
 
 
+def test_numbers_yaml_1_1_leaves_as_text_and_whole_floats_read_as_the_node_reads_them(tmp_path):
+    """``drift: 4e-9`` (PyYAML: a string) and ``delay: 3.0`` (the node takes 3.0) were refused."""
+    s = load_scenario(_write(tmp_path, "hyst_sim_scenario: 1\neffects: {drift: 4e-9, delay: 3.0}\n"))
+    eff = dict(s.effects)
+    assert eff["drift"].strength == 4e-9 and eff["delay"].strength == 3 and isinstance(eff["delay"].strength, int)
+
+
 @pytest.mark.parametrize("text, match", [
     ("effects: {creep: 0.01}\n", "not a hyst_sim scenario"),
     ("hyst_sim_scenario: 1\neffects: {backlash: 0.0123}\n", "unknown effect name"),
@@ -59,6 +66,14 @@ def test_scenario_overrides_named_effects_and_applies_mismatch_and_seed(tmp_path
     ("hyst_sim_scenario: 1\nmbw_factors: {zeta9: 1.0}\n", "mbw_factors"),
     ("hyst_sim_scenario: 1\nextra: 1\n", "unknown top-level"),
     ("hyst_sim_scenario: 1\neffects: [1, 2\n", "cannot read"),
+    # a non-finite shape put the reading at -1.8e10 m; a word meant two-sided; true was a 1 Hz resonance
+    ("hyst_sim_scenario: 1\neffects: {drift: {strength: 4.0e-9, sine: .inf}}\n", "not a finite number"),
+    ("hyst_sim_scenario: 1\neffects: {drift: {strength: 4.0e-9, walk: .nan}}\n", "not a finite number"),
+    ("hyst_sim_scenario: 1\neffects: {saturation: {strength: 0.0123, two_sided: 'no'}}\n", "not true or false"),
+    ("hyst_sim_scenario: 1\neffects: {dynamics: true}\n", "not a finite number"),
+    ("hyst_sim_scenario: 1\neffects: {delay: 2.5}\n", "not a whole number"),
+    ("hyst_sim_scenario: 1\nseed: true\n", "seed"),
+    ("hyst_sim_scenario: 1\nmbw_factors: {zeta1: true}\n", "mbw_factors"),
 ])
 def test_bad_scenarios_are_refused_without_echoing_values(tmp_path, text, match):
     p = _write(tmp_path, text)
