@@ -136,6 +136,13 @@ def check_model(model: MBWParams) -> MBWParams:
     return model
 
 
+#: Largest |reading| (m) a law without a model (PID) takes as a sample; beyond it the reading is corrupt and the
+#: command holds.
+MAX_READING = 1.0
+#: The model-based laws take readings within this many model output units of the model's offset.
+MODEL_READING_UNITS = 1000.0
+
+
 class BaseController:
     """Shared bookkeeping: limits, u_{k−1}/r_{k−1} memory, NaN guards, step counter.
 
@@ -167,6 +174,9 @@ class BaseController:
         self._du = 0.0  # last command increment u_{k−1} − u_{k−2} (V): the rate a successor continues from
         self._bad_inputs = 0
         self._saturated = 0
+        # readings farther than this from the centre are taken for corrupt samples (the model-based laws narrow it
+        # to their model's range); a metre is no micro-positioning stage's reading
+        self._y_centre, self._y_reach = 0.0, MAX_READING
 
     # -- protocol -------------------------------------------------------------------------------------------
     def reset(self, y0: float, u0: float, r0: float | None = None) -> None:
@@ -185,7 +195,9 @@ class BaseController:
         """One control sample (see the module docstring for the timing); returns the limited command (V)."""
         if self._u_prev != self._u_prev:  # never reset: start bumplessly from the safe output
             self.reset(y_k if math.isfinite(y_k) else 0.0, self.limits.v_safe, r_k)
-        if not math.isfinite(y_k):  # a bad sample: hold the output, do not let it into the law's memory
+        if not (math.isfinite(y_k) and abs(y_k - self._y_centre) <= self._y_reach):
+            # a bad sample (non-finite, or a reading no stage of this model gives: 1e304 m made DPPC's λ inf and
+            # ε NaN for good, PID's integrator NaN): hold the output, do not let it into the law's memory
             self._bad_inputs += 1
             return self._u_prev
         if not math.isfinite(r_k):
@@ -264,6 +276,8 @@ class ModelBased(BaseController):
         self._us = model.u_scale
         self._ys = model.y_scale
         self._off = model.offset
+        # the fitting convention puts the output range at 8 model units: a reading 1000 units away is no sample
+        self._y_centre, self._y_reach = model.offset, MODEL_READING_UNITS * model.y_scale
 
     def _rescale(self, old: MBWParams, new: MBWParams) -> None:
         """Re-express the law's model-unit memory from ``old``'s scaling in ``new``'s (overridden by the laws)."""

@@ -277,5 +277,6 @@ class DMRAC(ModelBased):
 
     def state(self) -> dict[str, float]:
         s = super().state()
-        s.update(epsilon=self._eps * self._ys, nu=self._nu, **dict(zip(ESTIMATE_NAMES, map(float, self._th))))
+        s.update(epsilon=self._eps * self._ys, nu=self._nu * self._us,
+                 **dict(zip(ESTIMATE_NAMES, map(float, self._th))))
         return s

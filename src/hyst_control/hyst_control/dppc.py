@@ -176,6 +176,6 @@ class DPPC(ModelBased):
 
     def state(self) -> dict[str, float]:
         s = super().state()
-        s.update(epsilon=self._eps, **{"lambda": self._lam * self._ys}, nu=self._nu,
+        s.update(epsilon=self._eps, **{"lambda": self._lam * self._ys}, nu=self._nu * self._us,
                  integral=self._z * self._ys, funnel_resets=float(self._resets))
         return s

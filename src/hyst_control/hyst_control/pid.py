@@ -247,13 +247,19 @@ class OpenLoop(ModelBased):
             # The bump is the departure from the command's course in force (u_{k−1} plus its last increment),
             # not from u_{k−1}: holding u_{k−1} for a sample on a moving reference (10 Hz sine: ≈ 1.7 V per
             # sample) and fading it out was itself the bump (pid → open_loop: +250 nm for ≈ 70 ms).
-            self._bump = self._u_prev + self._du - u_ff
+            # ... and from the feedforward the stage can get: handed over while saturated (r beyond the stroke),
+            # a bump against an unreachable feedforward was the saturation itself, still −12 V 50 ms later
+            lim = self.limits
+            self._bump = self._u_prev + self._du - min(max(u_ff, lim.v_min), lim.v_max)
         else:
             self._bump *= self._fade
         return u_ff + self._bump
 
     def _commit(self, u: float) -> None:
-        u_ff = u - self._bump  # what the feedforward actually got through the limiter
+        # what the feedforward actually got through the limiter, within the range: handed over while saturated
+        # (150 V with a -45 V bump) the model was advanced with 195 V and predicted beyond the stroke (790 nm)
+        lim = self.limits
+        u_ff = min(max(u - self._bump, lim.v_min), lim.v_max)
         self._ym_state = mbw_step(self._p, self._ym_state, u_ff / self._us, self._uff / self._us)
         self._uff = u_ff
         ya = mbw_step(self._p, self._ym_applied, u / self._us, self._ua / self._us)
@@ -263,5 +269,5 @@ class OpenLoop(ModelBased):
 
     def state(self) -> dict[str, float]:
         s = super().state()
-        s.update(nu=self._nu, prediction=self._ym_state * self._ys + self._off)
+        s.update(nu=self._nu * self._us, prediction=self._ym_state * self._ys + self._off)
         return s

@@ -74,11 +74,10 @@ def _plant_loop(u_cmd, p, f, st, creep_a, creep_c, phi, gam, dz, dbuf, normals, 
             a = f[F_YS] * f[F_YSTOPLO] + f[F_OFF]
             b = f[F_YS] * f[F_YSTOPHI] + f[F_OFF]
             lo, hi = min(a, b), max(a, b)
-            if x < lo:
-                x = lo
-                flags |= 8
-            elif x > hi:
-                x = hi
+            if x < lo or x > hi:  # the stage stops at the stop (an inelastic impact: the mode's energy is gone)
+                x = lo if x < lo else hi
+                dz[0] = x
+                dz[1] = 0.0
                 flags |= 8
         st[S_X] = x
         ym = x
