@@ -11,7 +11,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Spec", "param", "table"]
+__all__ = ["Spec", "param", "table", "not_finite"]
 
 
 @dataclass(frozen=True)
@@ -54,3 +54,16 @@ def table(cls: type) -> dict[str, Spec]:
         lo, hi = f.metadata["range"]
         out[f.name] = Spec(f.default, lo, hi, f.metadata["description"])
     return out
+
+
+
+def not_finite(obj: Any) -> str:
+    """'' when every numeric field of the dataclass instance ``obj`` is finite; else the first that is not (the
+    classes' own checks cover order and sign, not infinity: ``lambda0=inf`` passed and made every ε NaN). The
+    declared ranges bound what a user sets; the laws' own derating may go beyond them (a_m 0.995)."""
+    import math
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if not isinstance(v, bool) and isinstance(v, (int, float)) and not math.isfinite(v):
+            return f"{f.name} = {v!r} is not a finite number"
+    return ""

@@ -33,10 +33,10 @@ import numpy as np
 from numba import njit
 
 from hyst_common.limits import CommandLimits
-from hyst_common.params import param
+from hyst_common.params import not_finite, param
 from hyst_model.core import MBWParams, mbw_step
 
-from .base import ModelBased, invert_nu
+from .base import ModelBased, check_model, invert_nu
 from .errors import ConfigError
 
 __all__ = ["DMRACGains", "DMRAC", "TABLE53", "ESTIMATE_NAMES", "dmrac_adapt"]
@@ -89,6 +89,9 @@ class DMRACGains:
         return cls(kappa1=kappa, kappa2=kappa, **kw)
 
     def __post_init__(self) -> None:
+        bad = not_finite(self)
+        if bad:
+            raise ConfigError(f"DMRAC {bad}")
         if not (0 < self.kappa1 < 2 and 0 <= self.kappa2 < 2):
             raise ConfigError("DMRAC needs 0 < kappa1 < 2 and 0 <= kappa2 < 2 (Remark 5.1)")
         if not abs(self.a_m) < 1:
@@ -97,6 +100,26 @@ class DMRACGains:
             raise ConfigError("DMRAC needs zeta0 > 0, varrho > 0, theta_max > zeta0")
         if not self.deadzone >= 0:
             raise ConfigError("DMRAC deadzone must be >= 0")
+
+
+def _check_sets(gains: DMRACGains, model: MBWParams) -> None:
+    """The Lyapunov step (5.19)–(5.20) needs the true parameters inside the projection sets: ζ1 ≥ ζ0 (5.12b), every
+    value within the box θ_max, and — for a model that satisfies Remark 4.1 — α1 ≤ −|ψ1| − ϱ (5.16b), ϱ "very
+    small" (Remark 5.1). Outside them the estimates are pushed away from the truth: ϱ = 1 tracked at 3.5 µm,
+    θ_max = 0.01 at 2.2 µm, instead of 3 nm."""
+    vals = dict(zeta1=model.zeta1, zeta2=model.zeta2, psi1=model.psi1, psi2=model.psi2, alpha1=model.alpha1,
+                alpha2=model.alpha2)
+    if gains.zeta0 > model.zeta1:
+        raise ConfigError(f"zeta0 = {gains.zeta0:g} exceeds the model's zeta1 = {model.zeta1:g}: the projection "
+                          "(5.12b) would exclude the true value")
+    big = [k for k, v in vals.items() if abs(v) > gains.theta_max]
+    if big:
+        raise ConfigError(f"theta_max = {gains.theta_max:g} excludes the model's {big[0]} = {vals[big[0]]:g}: the "
+                          "box must hold the true parameters (model units)")
+    if model.alpha1 < -abs(model.psi1) and model.alpha1 > -abs(model.psi1) - gains.varrho:
+        raise ConfigError(f"varrho = {gains.varrho:g} exceeds the model's Remark 4.1 margin "
+                          f"{-abs(model.psi1) - model.alpha1:.3g} (alpha1 = {model.alpha1:g}, psi1 = "
+                          f"{model.psi1:g}): (5.16b) would exclude the true alpha1; Remark 5.1 takes it very small")
 
 
 @njit(cache=True)
@@ -184,6 +207,7 @@ class DMRAC(ModelBased):
     def __init__(self, model: MBWParams, dt: float, gains: DMRACGains = DMRACGains(),
                  initial: str | tuple = "model", limits: CommandLimits | None = None) -> None:
         super().__init__(model, dt, limits)
+        _check_sets(gains, self.model)
         self.gains = gains
         self.initial = initial
         self._th0 = self._initial_vector(initial)
@@ -210,11 +234,14 @@ class DMRAC(ModelBased):
         return th.copy()
 
     def set_gains(self, gains: DMRACGains) -> None:
+        _check_sets(gains, self.model)
         self.gains = gains
 
     def set_model(self, model: MBWParams) -> None:
         """New δ1, δ2 and scaling; the adapted estimates are kept (they are the controller's, not the model's),
-        re-expressed in the new scaling (:meth:`_rescale`)."""
+        re-expressed in the new scaling (:meth:`_rescale`); the gains' sets checked against it."""
+        if hasattr(self, "gains"):
+            _check_sets(self.gains, check_model(model))
         super().set_model(model)
         if hasattr(self, "_pe"):
             self._pe[6:] = self._p[6:]
