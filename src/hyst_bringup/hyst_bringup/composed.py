@@ -111,11 +111,14 @@ def _run(opts: argparse.Namespace, schedule: list, guard: StopGuard) -> int:
             print(f"hyst_loop_node: error: {err}", file=sys.stderr)
             return 2
         sim, ctl, ref = nodes
+        res = ref.set_parameters([Parameter("rate", value=float(opts.reference_rate))])[0]
+        if not res.successful:
+            raise ControlError(res.reason)
         if sim.get_parameter("mode").value == "realtime":
             ctl.follow(lambda t: ref.sample_at(int(round(t * 1e9)))[0])
-            res = ref.set_parameters([Parameter("rate", value=float(opts.reference_rate))])[0]
-            if not res.successful:
-                raise ControlError(res.reason)
+        else:  # lockstep: the trajectory runs on the stage's time, not the wall clock (reproducible runs)
+            ref.follow_clock()
+            ctl.follow(_on_stage_time(ref))
         if opts.wait_subscribers > 0:  # e.g. a bag recorder: nothing runs (no timers) until it listens
             until = time.monotonic() + 30.0
             while time.monotonic() < until and rclpy.ok() and not guard.stopped and not (
@@ -165,6 +168,21 @@ def _run(opts: argparse.Namespace, schedule: list, guard: StopGuard) -> int:
             n.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _on_stage_time(ref: ReferenceNode):
+    """The controller's reference source in lockstep: the trajectory sampled at the stage's time, and published
+    for observers at the reference node's rate on the same time (its own timer runs on the wall clock: a lockstep
+    run followed a 4.7 Hz sine for a 10 Hz one, and two runs differed)."""
+    last = [-(1 << 62)]
+
+    def source(t: float) -> float:
+        ns = int(round(t * 1e9))
+        if ns - last[0] >= 1e9 / ref.rate:
+            ref.publish_at(ns)
+            last[0] = ns
+        return ref.sample_at(ns)[0]
+    return source
 
 
 #: At most this long (s) at exit for a slower subscriber (a recorder) to take what the loop published.

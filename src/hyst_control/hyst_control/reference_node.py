@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import math
 
+from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
 
 from hyst_common.node import AtomicParametersNode, fp_range, run_node
@@ -46,7 +48,7 @@ class ReferenceNode(AtomicParametersNode):
         self._t_last: int | None = None   # clock time (ns) of the newest sample
         self._shift = 0.0  # s added to the trajectory's time: a sine's phase kept across frequency changes
         self._pub = self.create_publisher(JointState, "/stage/reference", 10)
-        self._timer = self.create_timer(1.0 / self._rate, self._tick)
+        self._timer: Timer | None = self.create_timer(1.0 / self._rate, self._tick)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
 
@@ -80,8 +82,9 @@ class ReferenceNode(AtomicParametersNode):
         rate = float(self.get_parameter("rate").value)
         if rate != self._rate:
             self._rate = rate
-            self.destroy_timer(self._timer)
-            self._timer = self.create_timer(1.0 / rate, self._tick)
+            if self._timer is not None:  # driven by another clock (follow_clock): no timer to re-make
+                self.destroy_timer(self._timer)
+                self._timer = self.create_timer(1.0 / rate, self._tick)
 
     def sample_at(self, t_ns: int) -> tuple[float, float]:
         """(r in m, ṙ in m/s) of the trajectory at clock time ``t_ns`` (ns), as a publication stamped then carries.
@@ -97,15 +100,31 @@ class ReferenceNode(AtomicParametersNode):
         r, v = self._ref.sample((min(t, self._duration) if hold else t) + self._shift)
         return float(r), 0.0 if hold or not math.isfinite(v) else float(v)
 
-    def _tick(self) -> None:
-        now = self.get_clock().now()
-        r, v = self.sample_at(now.nanoseconds)
+    def follow_clock(self) -> None:
+        """Stop publishing on this node's own timer: another clock drives the trajectory (the lockstep stage's,
+        through :meth:`publish_at`). On the wall clock a lockstep run followed a 4.7 Hz sine for a 10 Hz one and
+        differed run to run."""
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+            self._timer = None
+
+    def publish_at(self, t_ns: int) -> None:
+        """Publish the trajectory's sample at clock time ``t_ns`` (ns), stamped so."""
+        r, v = self.sample_at(t_ns)
         msg = JointState()
-        msg.header.stamp = now.to_msg()
+        msg.header.stamp = Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
         msg.name = ["stage"]
         msg.position = [r]
         msg.velocity = [v]
         self._pub.publish(msg)
+
+    @property
+    def rate(self) -> float:
+        """Publication rate (Hz)."""
+        return self._rate
+
+    def _tick(self) -> None:
+        self.publish_at(self.get_clock().now().nanoseconds)
 
 
 def main(args=None) -> int:
