@@ -47,7 +47,7 @@ from hyst_model.core import mbw_rest_state
 from .errors import ConfigError, SimError
 from .plant_kernel import (F_ASYM, F_CREEP, F_DA, F_DELAY, F_DQ, F_DR, F_DT, F_DW, F_DYN, F_HALF, F_NOISE, F_OFF,
                            F_QUANT, F_SAT, F_SATHI, F_SATLO, F_SATW, F_STEP, F_SUB, F_US, F_VMAX, F_VMIN, F_XMID,
-                           F_YS, F_YSTOPHI, F_YSTOPLO, N_F, S_DIDX, S_DT_T, S_T, S_UA, S_UM, S_X, S_XQ, S_Y,
+                           F_YS, F_YSTOPHI, F_YSTOPLO, N_F, S_DIDX, S_DRIFT, S_DT_T, S_T, S_UA, S_UM, S_X, S_XQ, S_Y,
                            _plant_loop)
 from .plant_config import PlantConfig, substeps_for
 from .stroke import check_bounded, rest_stroke
@@ -259,6 +259,8 @@ class Plant:
             st[S_DIDX] = 0.0
         if "drift" in names:
             st[S_DT_T] = 0.0  # the drift offset itself carries over: no jump in the reading
+            if self._f[F_DR] == 0.0 and self._f[F_DA] == 0.0 and self._f[F_DQ] == 0.0:
+                st[S_DRIFT] = 0.0  # switched off, it leaves the reading now, not again when switched back on
 
     def _take_normals(self, n: int) -> np.ndarray:
         if self._f[F_NOISE] == 0.0 and self._f[F_DQ] == 0.0:

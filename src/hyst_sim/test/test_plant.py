@@ -270,3 +270,16 @@ def test_ordinary_excitations_never_touch_the_stops():
     for f_hz in (1.0, 10.0, 100.0):
         r = plant.run(75.0 + 75.0 * np.sin(2 * np.pi * f_hz * t))
         assert not r.at_stop.any()
+
+
+def test_drift_switched_off_and_on_again_does_not_bring_its_old_offset_back():
+    """Off, the offset leaves the reading (the user asked so); on again, the reading jumped by the old offset."""
+    from hyst_sim.plant import PlantConfig
+    cfg = PlantConfig.for_profile("pea", 1000.0, sensor=False).with_strengths(drift=1e-7)
+    plant = Plant(cfg)
+    plant.reset()
+    plant.run(np.full(5000, 75.0))
+    plant.reconfigure(cfg.with_strengths(drift=0.0))
+    off = plant.run(np.full(10, 75.0)).y[-1]
+    plant.reconfigure(cfg.with_strengths(drift=1e-7))
+    assert abs(plant.run(np.full(2, 75.0)).y[0] - off) < 20e-9  # one sample of drift and its sine, not 748 nm
