@@ -164,7 +164,8 @@ class SimNode(AtomicParametersNode):
         d("params_file", "", ParameterDescriptor(description="MBW params file ('' = embedded default stage)"))
         d("scenario_file", "", ParameterDescriptor(
             description="hidden-effects scenario file ('' = none); its contents are never reported"))
-        d("seed", 0, ParameterDescriptor(description="seed of sensor noise and drift (applies at start)",
+        d("seed", 0, ParameterDescriptor(description="seed of sensor noise and drift (set at start: a change at run "
+                                                     "time was accepted and did nothing)", read_only=True,
                                          integer_range=int_range(0, 2**31 - 1)))
         d("rt_priority", 0, ParameterDescriptor(
             description="SCHED_FIFO priority of the node's threads, as the driver's (0 = normal scheduling; "
@@ -213,8 +214,8 @@ class SimNode(AtomicParametersNode):
         with self._lock:
             self._plant.reconfigure(plant_config(new))
             self._settings = new
-        self.get_logger().info("parameters applied: " + ", ".join(
-            p.name for p in params if not p.name.startswith(("scenario_file",))))
+        named = [p.name for p in params if not p.name.startswith(("scenario_file",))]
+        self.get_logger().info("parameters applied: " + (", ".join(named) if named else "the scenario (not shown)"))
 
     # Commands and samples -----------------------------------------------------------------------------------
     def _on_command(self, msg: JointState) -> None:
