@@ -207,6 +207,9 @@ def parse_reference(spec: str, stroke: tuple[float, float] | None = None) -> Ref
         nums = [float(x) for x in parts[1:]]
     except ValueError:
         raise ReferenceError_(f"reference {spec!r}: numbers expected after ':'") from None
+    if len(nums) > (2 if shape == "sine" else 1):  # sine:10:5:99 ran as sine:10:5, the 99 dropped silently
+        raise ReferenceError_(f"reference {spec!r}: too many numbers; sine:F[:A_um], constant[:LEVEL_um] or "
+                              f"{shape}[:A_um]")
     if shape == "sine":
         if not nums:
             raise ReferenceError_("sine needs a frequency: sine:F (Hz), optionally sine:F:A_um")

@@ -42,7 +42,8 @@ def test_c2_sweeps_frequency_continuously():
     assert np.max(np.abs(np.diff(r))) < 2 * np.pi * 20 * 10e-6 * 1e-5 * 1.01
 
 
-@pytest.mark.parametrize("bad", ["", "sine", "sine:abc", "sine:-1", "wave", "sine:1000"])
+@pytest.mark.parametrize("bad", ["", "sine", "sine:abc", "sine:-1", "wave", "sine:1000",
+                                 "sine:10:5:99", "c1:3:4", "constant:1:2"])  # extra numbers were dropped
 def test_bad_specs_get_a_clear_error(bad):
     with pytest.raises(ReferenceError_):
         parse_reference(bad)
