@@ -65,12 +65,9 @@ class ControllerSettings:
         """'' for a state sample the stage can produce; else why it is taken for corrupt: a reading more than one
         stroke beyond the model's travel (1e300 m, 1 m on a 30 µm stage), or an applied voltage more than a tenth
         of the range beyond the limits (the amplifier cannot apply it)."""
-        if self.stroke is not None:
-            lo, hi = self.stroke
-            span = hi - lo
-            if not lo - span <= y <= hi + span:
-                return (f"position {y:.6g} m is beyond the stage's travel ({lo:.3g}..{hi:.3g} m) by more than its "
-                        "stroke")
+        far = self._beyond_travel("position", y)
+        if far:
+            return far
         lim = self.limits
         margin = 0.1 * (lim.v_max - lim.v_min)
         if u is not None and math.isfinite(u) and not lim.v_min - margin <= u <= lim.v_max + margin:
@@ -80,12 +77,15 @@ class ControllerSettings:
     def plausible_reference(self, r: float) -> str:
         """'' for a reference a user could mean; else why it is taken for corrupt: more than one stroke beyond the
         travel, as :meth:`plausible` judges states (a 1e300 m reference drove the command to the range's end)."""
+        return self._beyond_travel("reference", r)
+
+    def _beyond_travel(self, what: str, v: float) -> str:
+        """Why ``v`` (m) lies more than one stroke beyond the model's travel, or '' (also without a travel)."""
         if self.stroke is not None:
             lo, hi = self.stroke
             span = hi - lo
-            if not lo - span <= r <= hi + span:
-                return (f"reference {r:.6g} m is beyond the stage's travel ({lo:.3g}..{hi:.3g} m) by more than its "
-                        "stroke")
+            if not lo - span <= v <= hi + span:
+                return f"{what} {v:.6g} m is beyond the stage's travel ({lo:.3g}..{hi:.3g} m) by more than its stroke"
         return ""
 
     def reachable(self, r: float) -> bool:
