@@ -114,7 +114,8 @@ def _run(opts: argparse.Namespace, schedule: list, guard: StopGuard) -> int:
         res = ref.set_parameters([Parameter("rate", value=float(opts.reference_rate))])[0]
         if not res.successful:
             raise ControlError(res.reason)
-        if sim.get_parameter("mode").value == "realtime":
+        lockstep = sim.get_parameter("mode").value == "lockstep"
+        if not lockstep:
             ctl.follow(lambda t: ref.sample_at(int(round(t * 1e9)))[0])
         else:  # lockstep: the trajectory runs on the stage's time, not the wall clock (reproducible runs)
             ref.follow_clock()
@@ -130,7 +131,7 @@ def _run(opts: argparse.Namespace, schedule: list, guard: StopGuard) -> int:
             ex.add_node(n)
         guard.phase("spin")
         t_start = time.monotonic()
-        clock = _clock(sim, t_start)
+        clock = _clock(sim, t_start, lockstep)
         seg, seg_start = -1, 0.0
         while rclpy.ok() and not guard.stopped:
             now = clock()
@@ -151,7 +152,7 @@ def _run(opts: argparse.Namespace, schedule: list, guard: StopGuard) -> int:
         # its own end, not a signal's (a user's Ctrl-C is not kept waiting for a stalled subscriber), in lockstep:
         # there the stage stops with the loop, while a realtime stage samples on and a wait only piled missed
         # periods onto the run's counts (4 000-6 000 in a 6 s demo against 150-350)
-        if rclpy.ok() and not guard.stopped and sim.get_parameter("mode").value == "lockstep":
+        if rclpy.ok() and not guard.stopped and lockstep:
             _wait_delivered(nodes, guard)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -199,22 +200,21 @@ def _wait_delivered(nodes: list, guard: StopGuard) -> None:
     until = time.monotonic() + DELIVERY_WAIT
     for n in nodes:
         for pub in list(n.publishers):
-            left = min(until - time.monotonic(), 0.5)  # in slices: a stop signal ends the wait
-            if until - time.monotonic() <= 0 or guard.stopped:
+            if time.monotonic() >= until or guard.stopped:
                 return
-            try:
-                while not pub.wait_for_all_acked(Duration(seconds=left)):
+            try:  # in slices of at most 0.5 s (a stop signal ends the wait), never negative (that waits for ever)
+                while not pub.wait_for_all_acked(Duration(seconds=min(max(until - time.monotonic(), 1e-3), 0.5))):
                     if guard.stopped or time.monotonic() >= until:
                         return
             except Exception:  # noqa: BLE001 - a publisher already gone or a shut-down context: nothing to wait for
                 pass
 
 
-def _clock(sim: SimNode, t_start: float):
+def _clock(sim: SimNode, t_start: float, lockstep: bool):
     """The schedule's clock: wall time in realtime; in lockstep the stage's own time (its steps over its rate), so
     a segment is the same number of samples on every machine (by wall time a loaded machine ran DPPC for 367-828
     of 2000 lockstep samples, and the figures moved with it)."""
-    if sim.get_parameter("mode").value != "lockstep":
+    if not lockstep:
         return lambda: time.monotonic() - t_start
     rate = float(sim.get_parameter("rate").value)
     return lambda: sim.counts["samples"] / rate

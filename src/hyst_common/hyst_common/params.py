@@ -8,6 +8,7 @@ is no second table to keep in step with the defaults. rclpy-free.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -56,12 +57,10 @@ def table(cls: type) -> dict[str, Spec]:
     return out
 
 
-
 def not_finite(obj: Any) -> str:
     """'' when every numeric field of the dataclass instance ``obj`` is finite; else the first that is not (the
     classes' own checks cover order and sign, not infinity: ``lambda0=inf`` passed and made every ε NaN). The
     declared ranges bound what a user sets; the laws' own derating may go beyond them (a_m 0.995)."""
-    import math
     for f in dataclasses.fields(obj):
         v = getattr(obj, f.name)
         if not isinstance(v, bool) and isinstance(v, (int, float)) and not math.isfinite(v):

@@ -136,6 +136,14 @@ def check_model(model: MBWParams) -> MBWParams:
     return model
 
 
+def check_zeta0(zeta0: float, model: MBWParams) -> None:
+    """Assumption 4.1 (and DMRAC's projection (5.12b)) asks ζ1 ≥ ζ0 > 0: a floor on μ above the model's own ζ1 is
+    another law (zeta0 = 1 on the thesis's ζ1 = 0.40 tracked at 1 µm instead of 3 nm)."""
+    if zeta0 > model.zeta1:
+        raise ConfigError(f"zeta0 = {zeta0:g} exceeds the model's zeta1 = {model.zeta1:g}: Assumption 4.1 needs "
+                          "zeta1 >= zeta0 > 0 (zeta0 is a floor on the model's own gain; (5.12b) would exclude it)")
+
+
 #: Largest |reading| (m) a law without a model (PID) takes as a sample; beyond it the reading is corrupt and the
 #: command holds.
 MAX_READING = 1.0

@@ -36,7 +36,7 @@ from hyst_common.limits import CommandLimits
 from hyst_common.params import not_finite, param
 from hyst_model.core import MBWParams, mbw_step
 
-from .base import ModelBased, check_model, invert_nu
+from .base import ModelBased, check_model, check_zeta0, invert_nu
 from .errors import ConfigError
 
 __all__ = ["DMRACGains", "DMRAC", "TABLE53", "ESTIMATE_NAMES", "dmrac_adapt"]
@@ -109,9 +109,7 @@ def _check_sets(gains: DMRACGains, model: MBWParams) -> None:
     θ_max = 0.01 at 2.2 µm, instead of 3 nm."""
     vals = dict(zeta1=model.zeta1, zeta2=model.zeta2, psi1=model.psi1, psi2=model.psi2, alpha1=model.alpha1,
                 alpha2=model.alpha2)
-    if gains.zeta0 > model.zeta1:
-        raise ConfigError(f"zeta0 = {gains.zeta0:g} exceeds the model's zeta1 = {model.zeta1:g}: the projection "
-                          "(5.12b) would exclude the true value")
+    check_zeta0(gains.zeta0, model)
     big = [k for k, v in vals.items() if abs(v) > gains.theta_max]
     if big:
         raise ConfigError(f"theta_max = {gains.theta_max:g} excludes the model's {big[0]} = {vals[big[0]]:g}: the "

@@ -36,7 +36,7 @@ from hyst_common.limits import CommandLimits
 from hyst_common.params import not_finite, param
 from hyst_model.core import MBWParams
 
-from .base import ModelBased, check_model, invert_nu
+from .base import ModelBased, check_model, check_zeta0, invert_nu
 from .errors import ConfigError
 
 __all__ = ["DPPCGains", "DPPC", "THESIS_TABLE42", "dppc_nu"]
@@ -78,14 +78,6 @@ class DPPCGains:
             raise ConfigError("DPPC ki must lie in [0, 1)")
         if not self.zeta0 > 0:
             raise ConfigError("zeta0 must be positive (Assumption 4.1)")
-
-
-def _check_zeta0(zeta0: float, model: MBWParams) -> None:
-    """Assumption 4.1 asks ζ1 ≥ ζ0 > 0: a floor on μ above the model's own ζ1 is another law (zeta0 = 1 on the
-    thesis's ζ1 = 0.40 tracked at 1 µm instead of 3 nm)."""
-    if zeta0 > model.zeta1:
-        raise ConfigError(f"zeta0 = {zeta0:g} exceeds the model's zeta1 = {model.zeta1:g}: Assumption 4.1 needs "
-                          "zeta1 >= zeta0 > 0 (zeta0 is a floor on the model's own gain)")
 
 
 #: Table 4.2 (λ in metres).
@@ -140,7 +132,7 @@ class DPPC(ModelBased):
                  limits: CommandLimits | None = None) -> None:
         super().__init__(model, dt, limits)
         self.gains = gains
-        _check_zeta0(gains.zeta0, self.model)
+        check_zeta0(gains.zeta0, self.model)
         self._lam = math.nan
         self._eps = 0.0
         self._nu = 0.0
@@ -149,13 +141,13 @@ class DPPC(ModelBased):
 
     def set_gains(self, gains: DPPCGains) -> None:
         """Swap gains at run time; the current funnel is kept (re-initialised only if it no longer fits)."""
-        _check_zeta0(gains.zeta0, self.model)
+        check_zeta0(gains.zeta0, self.model)
         self.gains = gains
 
     def set_model(self, model: MBWParams) -> None:
         """As :meth:`ModelBased.set_model`, the gains checked against the new model (Assumption 4.1)."""
         if hasattr(self, "gains"):
-            _check_zeta0(self.gains.zeta0, check_model(model))
+            check_zeta0(self.gains.zeta0, check_model(model))
         super().set_model(model)
 
     def _rescale(self, old: MBWParams, new: MBWParams) -> None:

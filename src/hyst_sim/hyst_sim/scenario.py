@@ -24,12 +24,12 @@ and returns its MBW part with SI scaling.
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import NamedTuple
 
 from hyst_model.core import PARAM_NAMES, MBWParams
+from hyst_model.io.params_file import NUMBER
 
 from .errors import ConfigError, ScenarioError
 from .truth_effects import EFFECT_NAMES, Effects
@@ -77,10 +77,6 @@ class Scenario:
                 from None
 
 
-#: A number as YAML 1.2 reads it, which PyYAML's YAML 1.1 leaves a string without a decimal point (``4e-9``).
-_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
-
-
 def _typed(p: Path, cls, settings: dict) -> dict:
     """Each setting as its field's type: a finite number for a number (``4e-9`` as YAML 1.1 leaves it, a whole
     ``3.0`` for an integer), true/false for a flag. ``sine: .inf`` loaded and put the reading at −1.8e10 m,
@@ -89,7 +85,7 @@ def _typed(p: Path, cls, settings: dict) -> dict:
     out = {}
     for k, v in settings.items():
         kind = types.get(k, "float")
-        if isinstance(v, str) and _NUMBER.fullmatch(v.strip()):
+        if isinstance(v, str) and NUMBER.fullmatch(v.strip()):  # YAML 1.1 leaves 4e-9 a string
             v = float(v)
         if "bool" in kind:
             if v is not None and not isinstance(v, bool):

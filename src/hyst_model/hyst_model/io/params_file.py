@@ -36,9 +36,9 @@ from ..errors import HystError, ParamsError
 from ..model import Model
 
 #: A number as YAML 1.2 reads it, which PyYAML's YAML 1.1 leaves a string without a decimal point (``1e-6``).
-_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
 
-__all__ = ["ParamsSpec", "read_params", "write_params", "spec_from_model", "to_yaml", "flatten", "nest"]
+__all__ = ["ParamsSpec", "read_params", "write_params", "spec_from_model", "to_yaml", "flatten", "nest", "NUMBER"]
 
 
 def flatten(d: Mapping, prefix: str = "") -> dict:
@@ -240,7 +240,7 @@ def read_params(path: str | Path) -> ParamsSpec:
     if not isinstance(fit, Mapping):
         raise ParamsError(f"{path}: 'fit' must be a mapping of provenance keys, not {type(fit).__name__}")
     # YAML 1.1 (PyYAML) reads 1e-6 (no decimal point) as a string: "lacks zeta2" for a key that is there
-    flat = {k: (float(v) if isinstance(v, str) and _NUMBER.fullmatch(v.strip()) else v)
+    flat = {k: (float(v) if isinstance(v, str) and NUMBER.fullmatch(v.strip()) else v)
             for k, v in flatten(model).items()}
     for k, v in flat.items():
         if isinstance(v, bool) or not isinstance(v, (int, float, str)):
