@@ -25,10 +25,7 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402 - after the BLAS thread variables above, which numpy reads at import
 
 from hyst_model.diagnose.unexplained import UNEXPLAINED_FACTOR  # noqa: E402 - as numpy
-
-
-def _rmse(e) -> float:
-    return float(np.sqrt(np.mean(np.square(e))))
+from hyst_model.identify.result import rmse as _rmse  # noqa: E402 - as numpy; inf for a model that flings, no warning
 
 
 def run_case(args: tuple) -> dict:

@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ..errors import DataError, EffectError, FitError
+from ..identify.result import rmse
 from ..effects import EFFECTS, compose
 from ..effects.compose import around_effects
 from ..effects.base import ComposedModel
@@ -42,10 +43,6 @@ def validation_mask(n: int, u: np.ndarray | None = None) -> np.ndarray:
     """
     from ..identify.result import block_mask
     return block_mask(n, SPLIT, BLOCKS, u)
-
-
-def rmse(e: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(e * e))) if e.size else float("nan")
 
 
 def paired_t(e_base: np.ndarray, e_new: np.ndarray, chunks: int = 40) -> float:
