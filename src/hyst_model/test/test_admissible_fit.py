@@ -5,10 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hyst_model.identify.admissible import MARGIN, AdmissibleModel, check_admissible
+from hyst_model.identify.admissible import MARGIN, REST_MARGIN, AdmissibleModel, check_admissible
 from hyst_model.spec import build_model
 
 PIEZO = Path(__file__).resolve().parents[4] / "shared" / "data" / "piezo_150V_1Hz" / "piezo_150V_1Hz.csv"
+#: What hyst diagnose named on the real piezo record (mbw+creep+saturation+dynamics, free: ψ2 = −1, α2 = 1).
+PIEZO_DIAGNOSED = Path(__file__).resolve().parent / "data" / "piezo_diagnosed_free.yaml"
 
 
 def _mbw():
@@ -31,6 +33,54 @@ def test_every_reparameterised_point_is_admissible_and_admissible_points_map_to_
     bad = m.pack({**m.unpack(m.theta0), "psi1": 0.02, "alpha1": 0.01})
     fixed = m.unpack(am.inner(am.outer(bad)))
     assert fixed["alpha1"] == pytest.approx(-0.02 - MARGIN)
+
+
+def test_with_the_input_range_every_reparameterised_point_has_a_rest_state_over_it():
+    """Under Remark 4.1 the hysteresis term expands the state at rest (a = δ1 + m1·(1 − δ2)·U), so the constrained
+    fit also keeps δ1 below 1 − m1·(1 − δ2)·U: a held input anywhere in the record's range has a rest state."""
+    m = _mbw()
+    u_max = 150.0
+    am = AdmissibleModel(m, u_max=u_max)
+    assert "delta1_margin" in am.names and "delta1" not in am.names
+    big_u = u_max / 15.0
+    rng = np.random.default_rng(1)
+    lo, hi = am.bounds
+    worst = 0.0
+    for _ in range(2000):
+        v = m.unpack(am.inner(rng.uniform(lo, hi)))
+        m1 = -v["alpha1"] - abs(v["psi1"])
+        a = v["delta1"] + m1 * (1.0 - v["delta2"]) * big_u
+        worst = max(worst, a)
+        assert 0.0 < v["delta1"] < 1.0 and 0.0 < v["delta2"] < 1.0, v  # what the controllers require
+    assert worst <= 1.0 - REST_MARGIN * (1 - 1e-6)
+    # an admissible point with a rest state maps to itself; δ1 = 1 (no rest state) is pulled inside
+    good = m.pack({**m.unpack(m.theta0), "psi1": 0.02, "alpha1": -0.05, "psi2": 0.01, "alpha2": -0.03,
+                   "delta1": 0.96, "delta2": 0.95})
+    np.testing.assert_allclose(am.inner(am.outer(good)), good, rtol=1e-12)
+    bad = m.unpack(am.inner(am.outer(m.pack({**m.unpack(good), "delta1": 1.0}))))
+    assert bad["delta1"] + (-bad["alpha1"] - bad["psi1"]) * (1 - bad["delta2"]) * big_u <= 1.0 - REST_MARGIN * 0.999
+
+
+@pytest.mark.skipif(not PIEZO.exists(), reason=f"shared data not present ({PIEZO})")
+def test_constrained_refit_of_the_diagnosed_piezo_model_is_one_the_controllers_take():
+    """hyst diagnose --admissible on the real piezo record: its named model (creep, saturation and a mode on the
+    MBW) refitted under Remark 4.1 had ended on δ1 = 1 — no rest state, diverging on a triangle over the record's
+    range, refused by the controllers. Now it stays bounded and usable, at a stated cost."""
+    from hyst_model.diagnose.refit import validation_mask
+    from hyst_model.identify.admissible import constrain
+    from hyst_model.io import load_record, read_params
+    rec = load_record(str(PIEZO), columns="t_s,voltage_V,displacement_um", units="s,V,um")
+    spec = read_params(PIEZO_DIAGNOSED)
+    m = spec.model()
+    th = spec.theta(m)
+    con = constrain(m, rec.t, rec.u, rec.y, th, validation_mask(len(rec.t), rec.u))
+    assert con is not None  # the free model is outside Remark 4.1
+    v = m.unpack(con.theta)
+    assert v["delta1"] < 1.0 and v["delta2"] < 1.0
+    adm = check_admissible(m, con.theta, record=(rec.t, rec.u, rec.y))
+    assert adm.remark_4_1 is True and adm.bounded is True, adm.divergence
+    assert adm.controllers.startswith("the controllers can use it"), adm.controllers
+    assert con.rmse < 3 * spec.fit["rmse"]
 
 
 @pytest.mark.skipif(not PIEZO.exists(), reason=f"shared data not present ({PIEZO})")
@@ -87,3 +137,12 @@ def test_admissible_on_a_model_without_alpha_psi_is_refused_with_one_message(cap
     assert main(["fit", str(data), "--model", "pi", "--admissible", "--quiet", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "no alpha/psi terms" in err and "Traceback" not in err and not out.exists()
+
+
+def test_a_memory_held_at_the_constrained_fits_limit_is_reported_as_a_bound():
+    m = _mbw()
+    th = m.pack({**m.unpack(m.theta0), "psi1": 0.02, "alpha1": -0.05, "psi2": 0.01, "alpha2": -0.03,
+                 "delta1": 0.96, "delta2": 1.0 - REST_MARGIN})
+    at = check_admissible(m, th).at_bounds
+    assert any(a.startswith("delta2 = ") and "constrained fit holds it" for a in at), at
+    assert not any(a.startswith("delta1") for a in at), at

@@ -19,6 +19,7 @@ from ..model import Model
 from .result import FitResult
 
 __all__ = ["Admissibility", "check_admissible", "probe_bounded", "AdmissibleModel", "fit_admissible", "MARGIN",
+           "REST_MARGIN",
            "outside", "constrain", "provenance", "constrained_summary", "require_remark",
            "DIVERGENCE_SPANS"]
 
@@ -94,6 +95,10 @@ def _check_parameters(model, theta, rel: float) -> Admissibility:
           if (np.isfinite(lo[i]) and v - lo[i] <= rel * width[i])
           or (np.isfinite(hi[i]) and hi[i] - v <= rel * width[i])]
     vals = dict(zip(names, theta))
+    # the constrained fit's own limit for the memories (REST_MARGIN below 1), reported as a bound is
+    at += [f"{d} = {vals[d]:.7g} (within {1.5 * REST_MARGIN:.2g} of 1, where the constrained fit holds it: the data "
+           "push it to 1)"
+           for d in ("delta1", "delta2") if d in vals and 1.0 - 1.5 * REST_MARGIN <= vals[d] < 1.0 - rel * 0.5]
     pairs = [(a, p) for a, p in (("alpha1", "psi1"), ("alpha2", "psi2")) if a in vals and p in vals]
     if not pairs:
         return Admissibility(None, [], at, "no MBW rate terms: Remark 4.1 does not apply")
@@ -119,6 +124,9 @@ def _check_parameters(model, theta, rel: float) -> Admissibility:
 
 #: Smallest margin α + |ψ| < −MARGIN the constrained fit keeps (in the model's normalised units).
 MARGIN = 1e-4
+#: Smallest rest contraction 1 − a the constrained fit keeps (per sample): a held input settles within about
+#: 1/REST_MARGIN samples. Also how far δ2 stays below 1 (the controllers need δ1, δ2 in (0, 1)).
+REST_MARGIN = 1e-6
 
 
 class AdmissibleModel(Model):
@@ -128,9 +136,17 @@ class AdmissibleModel(Model):
     ``alpha<i>_margin`` (m_i). :meth:`inner` maps a packed θ' back to the wrapped model's θ, so the result is an
     ordinary model of the same name (params files, controllers unchanged). Works for MBW/BW bases and composed
     models on them (the names are the same there).
+
+    With ``u_max`` (the largest |u| of the record, V) δ1 is replaced by ``delta1_margin`` (d1) too, so that a
+    held input has a rest state everywhere in the record's range. At rest (3.21) is y ← a·y + ζ1·ν with
+    ν = (1 − δ2)·u and, once y has the sign of ν, a = δ1 − ψ1|ν| − α1|ν| = δ1 + m1·|ν|: Remark 4.1 (m1 > 0)
+    makes the hysteresis term *expand* the state, so it needs δ1 < 1 − m1·(1 − δ2)·U (U = u_max / u_scale), or
+    the output grows without bound under a held input. δ1 = 1 − d1 − m1·(1 − δ2)·U, d1 ≥ :data:`REST_MARGIN`.
+    (The real piezo record's diagnosed model, refitted under Remark 4.1 without it, ended on δ1 = 1 and diverged
+    off its record; the controllers refuse δ1 = 1.)
     """
 
-    def __init__(self, model):
+    def __init__(self, model, u_max: float | None = None):
         from ..model import Param
         self.model = model
         self.name = model.name
@@ -154,6 +170,18 @@ class AdmissibleModel(Model):
                            q.unit, q.doc)
             ps[ia] = Param(f"{p.name}_margin", max(MARGIN, -p.default - abs(ps[ip].default)), MARGIN, top, p.unit,
                            f"how far {p.name} stays below −|{ps[ip].name}| (Remark 4.1)")
+        self.rest: tuple[int, int, int, float] | None = None  # (δ1, δ2, α1 index, U)
+        u_scale = float(model.config().get("u_scale", 1.0) or 1.0)
+        if (u_max is not None and "delta1" in names and "delta2" in names and "alpha1" in names
+                and "psi1" in names):
+            i1, i2 = names.index("delta1"), names.index("delta2")
+            d1, d2 = ps[i1], ps[i2]
+            ps[i2] = Param(d2.name, min(d2.default, 1.0 - REST_MARGIN), d2.lower, min(d2.upper, 1.0 - REST_MARGIN),
+                           d2.unit, d2.doc)
+            ps[i1] = Param("delta1_margin", max(REST_MARGIN, 1.0 - d1.default), REST_MARGIN, 1.0 - d1.lower,
+                           d1.unit, "how far delta1 stays below the largest value with a rest state over the "
+                           "record's input range (1 − m1·(1 − delta2)·u_max/u_scale)")
+            self.rest = (i1, i2, names.index("alpha1"), abs(float(u_max)) / u_scale)
         self._params = tuple(ps)
 
     def params(self):
@@ -165,9 +193,22 @@ class AdmissibleModel(Model):
     def inner(self, theta_c) -> np.ndarray:
         """θ of the wrapped model (α from ψ and the margin, clipped to α's own lower bound)."""
         th = np.asarray(theta_c, dtype=np.float64).copy()
-        lo, _ = self.model.bounds
+        lo, hi = self.model.bounds
         for ia, ip in self.pairs:
             th[ia] = max(-abs(th[ip]) - th[ia], lo[ia])
+        if self.rest is not None:
+            i1, i2, ia, big_u = self.rest
+            ip = self.names.index("psi1")
+            m1 = -th[ia] - abs(th[ip])  # α1's margin as applied (after the clip above)
+            k = (1.0 - th[i2]) * big_u
+            delta1 = 1.0 - th[i1] - m1 * k
+            if delta1 < lo[i1] and k > 0:
+                # δ1 at the bottom of its box: the rest state is kept by a smaller α1 margin instead (continuous
+                # at the switch; the floor MARGIN leaves a < 1 unless (1 − δ2)·U exceeds ~5000)
+                m1 = max((1.0 - th[i1] - lo[i1]) / k, MARGIN)
+                th[ia] = max(-abs(th[ip]) - m1, lo[ia])
+                delta1 = lo[i1]
+            th[i1] = min(delta1, hi[i1])
         return th
 
     def outer(self, theta) -> np.ndarray:
@@ -176,7 +217,12 @@ class AdmissibleModel(Model):
         for ia, ip in self.pairs:
             th[ia] = max(-th[ia] - abs(th[ip]), MARGIN)
         lo, hi = self.bounds
-        return np.clip(th, lo, hi)
+        th = np.clip(th, lo, hi)
+        if self.rest is not None:
+            i1, i2, ia, big_u = self.rest
+            th[i1] = max(1.0 - float(theta[i1]) - th[ia] * (1.0 - th[i2]) * big_u, REST_MARGIN)
+            th = np.clip(th, lo, hi)
+        return th
 
     def simulate(self, theta_c, t, u):
         return self.model.simulate(self.inner(theta_c), t, u)
@@ -239,6 +285,6 @@ def fit_admissible(model, t, u, y, theta, split, max_nfev: int = 150):
     constraint costs on these data.
     """
     from . import fit
-    am = AdmissibleModel(model)
+    am = AdmissibleModel(model, u_max=float(np.max(np.abs(u))))
     res = fit(am, t, u, y, method="fast", split=split, theta0=am.outer(theta), max_nfev=max_nfev)
     return am.inner(res.theta), res
