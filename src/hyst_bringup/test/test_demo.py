@@ -54,12 +54,22 @@ def test_demo_refuses_a_bad_schedule_with_one_line(tmp_path):
     assert not list(tmp_path.glob("demo_*"))
 
 
-def test_warm_up_runs_each_algorithm_and_rejects_unknown_ones():
+def test_warm_up_runs_each_algorithm_and_rejects_unknown_ones(monkeypatch):
     from hyst_control.errors import ControlError
-    from hyst_bringup.loop import warm_up
-    assert warm_up(["dppc", "dmrac", "pid", "open_loop"], 2000.0) > 0.0
+    import hyst_bringup.loop as loop
+    ran = []
+    real = loop.run_closed_loop
+
+    def spy(ctrl, *a, **k):  # the warm-up must really run each law's loop (that is what compiles it)
+        res = real(ctrl, *a, **k)
+        ran.append((type(ctrl).__name__, len(res.y)))
+        return res
+    monkeypatch.setattr(loop, "run_closed_loop", spy)
+    loop.warm_up(["dppc", "dmrac", "pid", "open_loop"], 2000.0)
+    assert len(ran) == 4 and len({name for name, _ in ran}) == 4, ran
+    assert all(n >= 10 for _, n in ran), ran  # 0.01 s at 2 kHz: samples were stepped, not skipped
     with pytest.raises(ControlError):
-        warm_up(["wobble"], 2000.0)
+        loop.warm_up(["wobble"], 2000.0)
 
 
 def test_demo_refuses_a_bad_rt_priority_with_one_line(tmp_path):

@@ -32,10 +32,10 @@ def test_every_thread_of_the_process_gets_fifo_where_allowed():
     code = """
 import os, threading, time
 from hyst_common.runtime import set_realtime
-ev = threading.Event(); seen = {}
+ev = threading.Event(); up = threading.Event(); seen = {}
 def early():
-    seen['early'] = threading.get_native_id(); ev.wait()
-t = threading.Thread(target=early); t.start(); time.sleep(0.05)
+    seen['early'] = threading.get_native_id(); up.set(); ev.wait()
+t = threading.Thread(target=early); t.start(); assert up.wait(60)
 s = set_realtime(17)
 def late():
     seen['late'] = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
@@ -52,8 +52,20 @@ print(s.policy, pol_early == (os.SCHED_FIFO, 17), seen['late'] == (os.SCHED_FIFO
     assert early == "True" and late == "True"
 
 
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="thread ids come from Linux /proc")
 def test_thread_list_is_this_process():
-    assert os.getpid() in runtime._threads() or not runtime._threads()
+    import threading
+    ids = runtime._threads()
+    assert os.getpid() in ids and threading.get_native_id() in ids
+    seen, started, stop = [], threading.Event(), threading.Event()
+    th = threading.Thread(target=lambda: (seen.append(threading.get_native_id()), started.set(), stop.wait(60)))
+    th.start()
+    try:
+        assert started.wait(60)
+        assert seen[0] in runtime._threads()
+    finally:
+        stop.set()
+        th.join()
 
 
 def test_own_args_are_those_before_ros_args():

@@ -34,8 +34,14 @@ def test_gma_is_bipolar_and_rests_at_zero_volts():
 
 
 def test_noise_is_seeded():
-    a = [LinearStage(PEA, 1000.0, seed=3).step(50.0).y for _ in range(2)]
-    assert a[0] == a[1]
+    def run(**kw):
+        s = LinearStage(PEA, 1000.0, **kw)
+        return [s.step(50.0).y for _ in range(50)]
+    a, b = run(seed=3), run(seed=3)
+    assert a == b                                       # the same seed, the same readings
+    assert run(seed=4) != a                             # another seed, other readings
+    assert run(seed=3, noise=0.0) != a                  # and they are noisy
+    assert len(set(a)) > 1
 
 
 def test_a_hysteretic_stage_is_refused_with_the_way_to_get_one():

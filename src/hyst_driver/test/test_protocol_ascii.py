@@ -81,15 +81,13 @@ def test_volts_to_uv_rounds_and_rejects():
 
 def test_every_single_bit_flip_is_detected():
     good = p.encode_sample(p.Sample(17, 1017000, 7500, 75_000_000))
-    n_detected = 0
+    assert p.decode_reply(good) == p.Sample(17, 1017000, 7500, 75_000_000)  # the unflipped frame decodes
     for i in range(1, len(good) - 2):  # flip every bit between '$' and "\r\n"
         for bit in range(8):
             bad = bytearray(good)
             bad[i] ^= 1 << bit
             with pytest.raises(ProtocolError):
                 p.decode_reply(bytes(bad))
-            n_detected += 1
-    assert n_detected == 8 * (len(good) - 3)
 
 
 def test_checksum_error_is_distinguished():

@@ -42,8 +42,14 @@ def test_creep_inverse_recovers_the_displacement_exactly(gain, tilt):
     inv.reset(float(x[0]), float(u[0]))
     xr = np.array([inv.measure(float(a), float(b)) for a, b in zip(y, u)])
     assert np.max(np.abs(xr - x)) < 1e-12
-    # target() is the same inverse without advancing the lags: asked twice, the same answer
-    assert inv.target(float(y[-1]), float(u[-1])) == inv.target(float(y[-1]), float(u[-1]))
+    # target() is the same inverse without advancing the lags: what measure() would answer from this state,
+    # and asked twice, the same answer
+    import copy
+    yn, un = float(y[-1]) + 1e-7, float(u[-1]) + 5.0
+    first = inv.target(yn, un)
+    assert first == pytest.approx(copy.deepcopy(inv).measure(yn, un), abs=1e-15)
+    assert abs(first - yn) > 1e-10  # the lags' part was removed
+    assert inv.target(yn, un) == first
 
 
 def test_asymmetry_inverse_recovers_the_displacement_exactly():

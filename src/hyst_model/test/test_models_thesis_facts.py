@@ -92,9 +92,11 @@ def test_nu_convention_absorbed_dt_is_bounded_literal_dt_diverges():
                 diverged = True
                 break
     assert diverged
-    # the control-law reading of the convention: u_k = δ2 u_{k-1} + ν_k reproduces the input exactly
-    nu = u[1:] - p[7] * u[:-1]
-    np.testing.assert_allclose(p[7] * u[:-1] + nu, u[1:], rtol=0, atol=1e-12)
+    # the library's recursion takes ν_k = u_k − δ2·u_{k−1} (no Δt): from y = 0 one step is (ζ1 + ζ2·|Δu|)·ν_k
+    from hyst_model.core import mbw_step
+    for uk, up in ((3.0, 1.0), (-2.0, 4.0), (0.5, 0.5)):
+        nu = uk - p[7] * up
+        assert mbw_step(p, 0.0, uk, up) == pytest.approx((p[0] + p[1] * abs(uk - up)) * nu, rel=1e-12)
 
 
 @pytest.mark.parametrize("xi,phi,gamma", [(0.85, 0.5, 0.115), (0.8, 0.035, 0.003), (1.0, 0.2, 0.5),

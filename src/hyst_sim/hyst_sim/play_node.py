@@ -60,6 +60,9 @@ class PlayNode(Node):
             if m.topic not in self._pubs:
                 self._pubs[m.topic] = self.create_publisher(message_class(m.msgtype), m.topic, qos)
         self.published = 0
+        #: (index in ``messages``, seconds after its pass's start it was due, seconds after it was published): what
+        #: the player aimed at and did, for tests and diagnostics (a message is never published before it is due)
+        self.sent: list[tuple[int, float, float]] = []
         self.done = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._play, name="hyst_bag_play", daemon=True)
@@ -84,13 +87,17 @@ class PlayNode(Node):
             t_first = self.messages[0].t_ns
             while not self._stop.is_set():
                 start = time.monotonic()
-                for m in self.messages:
+                for i, m in enumerate(self.messages):
                     due = start + (m.t_ns - t_first) * 1e-9 / self.rate
                     wait = due - time.monotonic()
-                    if wait > 0 and self._stop.wait(wait):
-                        return
+                    while wait > 0:  # Event.wait may return a little early: never publish before the due time
+                        if self._stop.wait(wait):
+                            return
+                        wait = due - time.monotonic()
                     self._pubs[m.topic].publish(m.data)
                     self.published += 1
+                    if len(self.sent) < 100_000:  # bounded: a looping player runs for hours
+                        self.sent.append((i, due - start, time.monotonic() - start))
                 if not self.loop:
                     return
         finally:

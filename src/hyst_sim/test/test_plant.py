@@ -145,7 +145,9 @@ def test_drift_is_independent_of_the_input_and_has_the_set_rate():
     slope = np.polyfit(np.arange(20000) * DT, da, 1)[0]
     assert slope == pytest.approx(r, rel=1e-6)
     walk = Plant(BASE.with_strengths(drift=r)).run(ub).y - Plant(BASE).run(ub).y
-    assert np.std(np.diff(walk)) > 0                              # default shape adds a random walk
+    # the default shape adds a random walk: increments of walk·r·√dt RMS (the trend and the slow sine add ~r·dt)
+    walk_rms = type(BASE.effects.drift)().walk * r * np.sqrt(DT)
+    assert walk_rms > 0 and np.std(np.diff(walk)) == pytest.approx(walk_rms, rel=0.05)
 
 
 def test_noise_and_quantisation_have_the_set_size():
