@@ -61,3 +61,15 @@ def _params(tmp_path, csv):
     out = tmp_path / "p.yaml"
     assert main(["fit", str(csv), "--quiet", "--out", str(out)]) == 0
     return out
+
+
+def test_a_large_displacement_in_units_the_user_gave_is_not_called_a_unit_mistake(tmp_path, capsys):
+    """The Bouc-Wen benchmark's millimetres, given as ``--units s,N,m``: no advice to give the unit again."""
+    t, u, y = _record()
+    w = plausibility(t, u, y * 1e4, units_given=True)           # 2.8 mm of travel, stated in metres
+    assert len(w) == 1 and "in the units given" in w[0] and "--units" not in w[0], w
+    p = tmp_path / "big.csv"
+    np.savetxt(p, np.c_[t, u, y * 1e4], delimiter=",", header="t,u,y", comments="")
+    assert main(["fit", str(p), "--units", "s,N,m", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "in the units given" in err and "--units s,V,um" not in err

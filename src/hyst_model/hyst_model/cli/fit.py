@@ -82,7 +82,8 @@ def load_checked(args) -> Record:
     rec.check()
     from ..io.plausible import plausibility
     units = rec.meta.get("units") or ("s", "V", "m")
-    for warning in plausibility(rec.t, rec.u, rec.y, input_unit=str(units[1])):
+    for warning in plausibility(rec.t, rec.u, rec.y, input_unit=str(units[1]),
+                                units_given=getattr(args, "units", None) is not None):
         print(f"hyst: warning: {args.data}: {warning}", file=sys.stderr)
     if args.resample is not None:
         dt = 1.0 / args.resample

@@ -30,7 +30,8 @@ INPUT_MAX = 1000.0
 RATE_RANGE = (10.0, 100e3)
 
 
-def plausibility(t: np.ndarray, u: np.ndarray, y: np.ndarray, input_unit: str = "V") -> list[str]:
+def plausibility(t: np.ndarray, u: np.ndarray, y: np.ndarray, input_unit: str = "V",
+                 units_given: bool = False) -> list[str]:
     """Warnings (sentences) for figures no smart-material stage record has; empty when plausible.
 
     Parameters
@@ -39,6 +40,9 @@ def plausibility(t: np.ndarray, u: np.ndarray, y: np.ndarray, input_unit: str = 
         The record in SI units (s, V, m), as read.
     input_unit : str
         The unit the input column was given in; the voltage range is only checked for volts.
+    units_given : bool
+        The user stated the units (``--units``): a displacement far beyond any stage's stroke is then not taken for
+        a unit mistake (the Bouc-Wen benchmark's millimetres, given as m), only said to be no stage of this rig.
     """
     out: list[str] = []
     t, u, y = (np.asarray(a, dtype=np.float64) for a in (t, u, y))
@@ -52,7 +56,11 @@ def plausibility(t: np.ndarray, u: np.ndarray, y: np.ndarray, input_unit: str = 
                            f"{RATE_RANGE[1] / 1e3:g} kHz: "
                            "are the times in ms or µs read as seconds? give the unit, e.g. --units ms,V,um")
     span = float(np.ptp(y)) if y.size else 0.0
-    if span > STROKE_FACTOR * STROKE_MAX:
+    if span > STROKE_FACTOR * STROKE_MAX and units_given:
+        out.append(f"the displacement spans {span:.4g} m, {span / STROKE_MAX:.3g}× the largest stage stroke "
+                   f"({STROKE_MAX * 1e6:g} µm), in the units given: no stage of this rig — the model is fitted, "
+                   "but the stage profiles' limits do not describe it")
+    elif span > STROKE_FACTOR * STROKE_MAX:
         out.append(f"the displacement spans {span:.4g} m, {span / STROKE_MAX:.3g}× the largest stage stroke "
                    f"({STROKE_MAX * 1e6:g} µm): is it in µm or nm read as metres? give the unit, e.g. --units s,V,um")
     if input_unit in ("V", "v") and u.size:
