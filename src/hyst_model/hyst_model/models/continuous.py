@@ -58,18 +58,11 @@ def backlash_like(a: float, b: float, c: float, u: np.ndarray, y0: float = 0.0) 
 
 @njit(cache=True, nogil=True)
 def dahl(alpha: float, beta: float, u: np.ndarray, y0: float = 0.0) -> np.ndarray:
-    """Dahl model (3.6), r = 1, for a piecewise-linear input; exact per interval (3.7)."""
-    n = u.shape[0]
-    y = np.empty(n)
-    yk = y0
-    y[0] = yk
-    for k in range(1, n):
-        du = u[k] - u[k - 1]
-        if du != 0.0:
-            s = 1.0 if du > 0 else -1.0
-            yk = _lin_exact(yk, du, alpha * s, beta, 0.0, u[k - 1])
-        y[k] = yk
-    return y
+    """Dahl model (3.6), r = 1, for a piecewise-linear input; exact per interval (3.7).
+
+    dy/du = β − α·s·y: the backlash-like law (3.1) without its c·s·u term, so the same interval solution serves.
+    """
+    return backlash_like(alpha, beta, 0.0, u, y0)
 
 
 @njit(cache=True, nogil=True)
