@@ -95,7 +95,7 @@ def _check_parameters(model, theta, rel: float) -> Admissibility:
           if (np.isfinite(lo[i]) and v - lo[i] <= rel * width[i])
           or (np.isfinite(hi[i]) and hi[i] - v <= rel * width[i])]
     vals = dict(zip(names, theta))
-    # the constrained fit's own limit for the memories (REST_MARGIN below 1), reported as a bound is
+    # a memory held at the constrained fit's own limit (REST_MARGIN below 1) is reported as a bound would be
     at += [f"{d} = {vals[d]:.7g} (within {1.5 * REST_MARGIN:.2g} of 1, where the constrained fit holds it: the data "
            "push it to 1)"
            for d in ("delta1", "delta2") if d in vals and 1.0 - 1.5 * REST_MARGIN <= vals[d] < 1.0 - rel * 0.5]
@@ -170,7 +170,7 @@ class AdmissibleModel(Model):
                            q.unit, q.doc)
             ps[ia] = Param(f"{p.name}_margin", max(MARGIN, -p.default - abs(ps[ip].default)), MARGIN, top, p.unit,
                            f"how far {p.name} stays below −|{ps[ip].name}| (Remark 4.1)")
-        self.rest: tuple[int, int, int, float] | None = None  # (δ1, δ2, α1 index, U)
+        self.rest: tuple[int, int, int, int, float] | None = None  # (δ1, δ2, α1, ψ1 indices, U)
         u_scale = float(model.config().get("u_scale", 1.0) or 1.0)
         if (u_max is not None and "delta1" in names and "delta2" in names and "alpha1" in names
                 and "psi1" in names):
@@ -181,7 +181,7 @@ class AdmissibleModel(Model):
             ps[i1] = Param("delta1_margin", max(REST_MARGIN, 1.0 - d1.default), REST_MARGIN, 1.0 - d1.lower,
                            d1.unit, "how far delta1 stays below the largest value with a rest state over the "
                            "record's input range (1 − m1·(1 − delta2)·u_max/u_scale)")
-            self.rest = (i1, i2, names.index("alpha1"), abs(float(u_max)) / u_scale)
+            self.rest = (i1, i2, names.index("alpha1"), names.index("psi1"), abs(float(u_max)) / u_scale)
         self._params = tuple(ps)
 
     def params(self):
@@ -197,8 +197,7 @@ class AdmissibleModel(Model):
         for ia, ip in self.pairs:
             th[ia] = max(-abs(th[ip]) - th[ia], lo[ia])
         if self.rest is not None:
-            i1, i2, ia, big_u = self.rest
-            ip = self.names.index("psi1")
+            i1, i2, ia, ip, big_u = self.rest
             m1 = -th[ia] - abs(th[ip])  # α1's margin as applied (after the clip above)
             k = (1.0 - th[i2]) * big_u
             delta1 = 1.0 - th[i1] - m1 * k
@@ -219,7 +218,7 @@ class AdmissibleModel(Model):
         lo, hi = self.bounds
         th = np.clip(th, lo, hi)
         if self.rest is not None:
-            i1, i2, ia, big_u = self.rest
+            i1, i2, ia, _, big_u = self.rest
             th[i1] = max(1.0 - float(theta[i1]) - th[ia] * (1.0 - th[i2]) * big_u, REST_MARGIN)
             th = np.clip(th, lo, hi)
         return th

@@ -56,13 +56,12 @@ def plausibility(t: np.ndarray, u: np.ndarray, y: np.ndarray, input_unit: str = 
                            f"{RATE_RANGE[1] / 1e3:g} kHz: "
                            "are the times in ms or µs read as seconds? give the unit, e.g. --units ms,V,um")
     span = float(np.ptp(y)) if y.size else 0.0
-    if span > STROKE_FACTOR * STROKE_MAX and units_given:
-        out.append(f"the displacement spans {span:.4g} m, {span / STROKE_MAX:.3g}× the largest stage stroke "
-                   f"({STROKE_MAX * 1e6:g} µm), in the units given: no stage of this rig — the model is fitted, "
-                   "but the stage profiles' limits do not describe it")
-    elif span > STROKE_FACTOR * STROKE_MAX:
-        out.append(f"the displacement spans {span:.4g} m, {span / STROKE_MAX:.3g}× the largest stage stroke "
-                   f"({STROKE_MAX * 1e6:g} µm): is it in µm or nm read as metres? give the unit, e.g. --units s,V,um")
+    if span > STROKE_FACTOR * STROKE_MAX:
+        said = (f"the displacement spans {span:.4g} m, {span / STROKE_MAX:.3g}× the largest stage stroke "
+                f"({STROKE_MAX * 1e6:g} µm)")
+        out.append(f"{said}, in the units given: no stage of this rig — the model is fitted, but the stage "
+                   "profiles' limits do not describe it" if units_given else
+                   f"{said}: is it in µm or nm read as metres? give the unit, e.g. --units s,V,um")
     if input_unit in ("V", "v") and u.size:
         lo, hi = float(np.min(u)), float(np.max(u))
         if max(abs(lo), abs(hi)) > INPUT_MAX:
