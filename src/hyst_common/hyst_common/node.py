@@ -19,10 +19,11 @@ from __future__ import annotations
 
 import sys
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterException, ParameterNotDeclaredException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -37,7 +38,8 @@ from .runtime import own_args
 from .startup import end_quiet_start
 from .stopping import StopGuard
 
-__all__ = ["run_node", "AtomicParametersNode", "fp_range", "int_range", "STARTUP_ERRORS", "KEEP_ALL_RELIABLE"]
+__all__ = ["run_node", "AtomicParametersNode", "fp_range", "int_range", "STARTUP_ERRORS", "KEEP_ALL_RELIABLE",
+           "diagnostic_status", "diagnostic_array"]
 
 #: Every sample reaches every reader (a slow reliable reader slows the writer instead of losing samples): the
 #: lockstep sim's ``/stage/state``, the bag recorder, test readers. ``depth`` only sizes the first allocation.
@@ -58,6 +60,24 @@ def fp_range(lo: float, hi: float) -> list[FloatingPointRange]:
 def int_range(lo: int, hi: int) -> list[IntegerRange]:
     """``integer_range`` of a ParameterDescriptor (step 1)."""
     return [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+
+
+def diagnostic_status(name: str, hardware_id: str, level: bytes, message: str,
+                      values: Mapping[str, Any] | None = None) -> DiagnosticStatus:
+    """One ``/diagnostics`` status; each value as text (floats to 6 significant digits, the rest by ``str``).
+
+    ``level`` is ``DiagnosticStatus.OK``, ``WARN`` or ``ERROR``.
+    """
+    return DiagnosticStatus(name=name, hardware_id=hardware_id, level=level, message=message,
+                            values=[KeyValue(key=str(k), value=f"{v:.6g}" if isinstance(v, float) else str(v))
+                                    for k, v in (values or {}).items()])
+
+
+def diagnostic_array(node: Node, statuses: Sequence[DiagnosticStatus]) -> DiagnosticArray:
+    """The statuses stamped with the node's clock, ready to publish on ``/diagnostics``."""
+    arr = DiagnosticArray(status=list(statuses))
+    arr.header.stamp = node.get_clock().now().to_msg()
+    return arr
 
 
 class _AllOrNothingService(ParameterService):

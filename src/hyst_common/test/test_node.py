@@ -236,3 +236,24 @@ def test_an_exit_code_on_exit_returns_is_the_processes(code, expect):
     """The driver returns 3 when its output was not confirmed at v_safe: exit 0 hid a device left at 100 V."""
     r = subprocess.run([sys.executable, "-c", FINISHING, code], capture_output=True, text=True, timeout=120)
     assert r.returncode == expect, r.stderr
+
+
+def test_diagnostics_carry_every_value_as_text_stamped_by_the_node(ctx):
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from hyst_common.node import diagnostic_array, diagnostic_status
+    node = Window(context=ctx)
+    try:
+        st = diagnostic_status("hyst_x", "stage", DiagnosticStatus.WARN, "degraded",
+                               {"count": 3, "ratio": 1.0 / 3.0, "mode": "lockstep", "flag": True})
+        assert (st.name, st.hardware_id, st.level, st.message) == ("hyst_x", "stage", DiagnosticStatus.WARN,
+                                                                   "degraded")
+        assert [(kv.key, kv.value) for kv in st.values] == [("count", "3"), ("ratio", "0.333333"),
+                                                            ("mode", "lockstep"), ("flag", "True")]
+        arr = diagnostic_array(node, [st, diagnostic_status("hyst_y", "stage", DiagnosticStatus.OK, "ok")])
+        assert [s.name for s in arr.status] == ["hyst_x", "hyst_y"] and arr.status[1].values == []
+        now = node.get_clock().now().nanoseconds
+        stamp = arr.header.stamp.sec * 10**9 + arr.header.stamp.nanosec
+        assert 0 < stamp <= now
+    finally:
+        node.destroy_node()

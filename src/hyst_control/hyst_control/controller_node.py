@@ -26,12 +26,12 @@ import math
 import time
 from typing import Any, Callable
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from sensor_msgs.msg import JointState
 
-from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from hyst_common.node import AtomicParametersNode, diagnostic_array, diagnostic_status, fp_range, int_range, run_node
 from hyst_common.errors import ConfigError
 from hyst_common.profiles import CUSTOM_V_MAX, custom_base, custom_range, get_profile
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
@@ -435,38 +435,37 @@ class ControllerNode(AtomicParametersNode):
         self._publish_command(self.get_clock().now().to_msg(), u)
 
     def _diagnostics(self) -> None:
-        st = DiagnosticStatus(name="hyst_controller", hardware_id="stage")
         if self._tripped:
-            st.level, st.message = DiagnosticStatus.ERROR, "watchdog: no /stage/state, holding v_safe"
+            level, message = DiagnosticStatus.ERROR, "watchdog: no /stage/state, holding v_safe"
         elif self._ctrl is None:
-            st.level, st.message = DiagnosticStatus.WARN, "waiting for /stage/state"
+            level, message = DiagnosticStatus.WARN, "waiting for /stage/state"
         else:
-            st.level, st.message = DiagnosticStatus.OK, f"{self._settings.algorithm} running"
+            level, message = DiagnosticStatus.OK, f"{self._settings.algorithm} running"
         new = {k: self._n[k] - self._n_seen.get(k, 0) for k in ("bad_states", "bad_refs", "unreachable_refs")}
         self._n_seen = dict(self._n)
         said = {"bad_states": "corrupt or non-finite states ignored",
                 "bad_refs": "non-finite or implausible references ignored",
                 "unreachable_refs": "references beyond the stage's travel"}
         if any(new.values()):  # what went wrong since the last report, while it goes on
-            st.level = max(st.level, DiagnosticStatus.WARN)
-            st.message += "; " + ", ".join(f"{n} {said[k]}" for k, n in new.items() if n)
+            level = max(level, DiagnosticStatus.WARN)
+            message += "; " + ", ".join(f"{n} {said[k]}" for k, n in new.items() if n)
         if self._unused:  # whatever else is going on, the dropped model terms stay visible
-            st.level = max(st.level, DiagnosticStatus.WARN)
-            st.message += f"; {self._unused}"
+            level = max(level, DiagnosticStatus.WARN)
+            message += f"; {self._unused}"
         if self._oscillation:  # the oscillation watch derated the law (or, under policy warn, only saw it)
-            st.level = max(st.level, DiagnosticStatus.WARN)
-            st.message += f"; {self._oscillation}"
+            level = max(level, DiagnosticStatus.WARN)
+            message += f"; {self._oscillation}"
         if self._settings.divergence:  # the feedback laws run it; the open-loop parts would not
-            st.level = max(st.level, DiagnosticStatus.WARN)
-            st.message += f"; {self._settings.divergence}"
+            level = max(level, DiagnosticStatus.WARN)
+            message += f"; {self._settings.divergence}"
         stab = self._settings.stability
         if stab is not None and stab.warn:  # derated (or running unstable gains under policy warn)
-            st.level = max(st.level, DiagnosticStatus.WARN)
-            st.message += f"; {stab.message}"
+            level = max(level, DiagnosticStatus.WARN)
+            message += f"; {stab.message}"
         others = self._other_commanders()
         if others:  # two sources of /stage/command: the stage follows whichever wrote last
-            st.level = max(st.level, DiagnosticStatus.WARN)
-            st.message += (f"; {others} other publisher(s) on {self._cmd_pub.topic_name}: another controller or "
+            level = max(level, DiagnosticStatus.WARN)
+            message += (f"; {others} other publisher(s) on {self._cmd_pub.topic_name}: another controller or "
                            "excitation is commanding this stage too")
         vals = dict(self._n, algorithm=self._settings.algorithm, other_command_publishers=others,
                     compensated=",".join(self._compensating))
@@ -481,11 +480,8 @@ class ControllerNode(AtomicParametersNode):
         for a, m in self.tracking_summary().items():
             vals[f"rmse_{a}"] = f"{m['rmse']:.3e}"
             vals[f"mae_{a}"] = f"{m['mae']:.3e}"
-        st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st]
-        self._diag_pub.publish(arr)
+        st = diagnostic_status("hyst_controller", "stage", level, message, vals)
+        self._diag_pub.publish(diagnostic_array(self, [st]))
 
     def _other_commanders(self) -> int:
         """Publishers on the command topic besides this node (from the ROS graph); logged once when they appear."""

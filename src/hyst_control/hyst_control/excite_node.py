@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import math
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from sensor_msgs.msg import JointState
 
-from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from hyst_common.node import AtomicParametersNode, diagnostic_array, diagnostic_status, fp_range, int_range, run_node
 from hyst_common.errors import ConfigError as CommonConfigError
 from hyst_common.profiles import CUSTOM_V_MAX, GMA_LIMITS, PEA_LIMITS, custom_range
 
@@ -186,17 +186,13 @@ class ExciteNode(AtomicParametersNode):
         return False
 
     def _publish_diagnostics(self) -> None:
-        st = DiagnosticStatus(name="hyst_excite", hardware_id="stage")
         n = sum(self.ignored.values())
-        st.level = DiagnosticStatus.WARN if n else DiagnosticStatus.OK
-        st.message = (f"{n} state(s) not answered" if n else "playing") if not self.done else "finished"
+        message = (f"{n} state(s) not answered" if n else "playing") if not self.done else "finished"
         vals = {"answered": self.answered, "samples": int(self.excitation.u.size), "done": self.done,
                 **{f"ignored_{k}": v for k, v in self.ignored.items()}}
-        st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st]
-        self._diag_pub.publish(arr)
+        st = diagnostic_status("hyst_excite", "stage", DiagnosticStatus.WARN if n else DiagnosticStatus.OK,
+                               message, vals)
+        self._diag_pub.publish(diagnostic_array(self, [st]))
 
     def flush(self, timeout: float) -> bool:
         """Wait until every subscriber has acknowledged every command (reliable QoS), at most ``timeout`` s.

@@ -17,14 +17,14 @@ from collections import deque
 from dataclasses import dataclass, replace
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.parameter import Parameter
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 from hyst_common.errors import ConfigError as HystConfigError
-from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from hyst_common.node import AtomicParametersNode, diagnostic_array, diagnostic_status, fp_range, int_range, run_node
 from hyst_common.profiles import CUSTOM_V_MAX, GMA, PEA, Profile, check_range, custom_slew, get_profile, rest_voltage
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
@@ -285,19 +285,18 @@ class DriverNode(AtomicParametersNode):
 
         bad = sum(h.bad_frames.values())
         bad_prev = sum(prev.bad_frames.values()) if prev is not None else 0
-        st = DiagnosticStatus(name="hyst_driver: stage link", hardware_id=h.identity or self.cfg.port)
         if h.state != "running":
-            st.level, st.message = DiagnosticStatus.ERROR, f"link {h.state}: {h.last_link_error or 'connecting'}"
+            level, message = DiagnosticStatus.ERROR, f"link {h.state}: {h.last_link_error or 'connecting'}"
         elif self.io_errors != getattr(self, "_prev_io_errors", 0):
-            st.level, st.message = DiagnosticStatus.ERROR, f"{self.io_errors} I/O loop errors (see log)"
+            level, message = DiagnosticStatus.ERROR, f"{self.io_errors} I/O loop errors (see log)"
         elif grew("severe_faults"):
-            st.level, st.message = DiagnosticStatus.ERROR, f"device fault {h.last_device_error}"
+            level, message = DiagnosticStatus.ERROR, f"device fault {h.last_device_error}"
         elif bad != bad_prev or grew("device_errors") or grew("timeouts") or grew("disconnects"):
-            st.level, st.message = DiagnosticStatus.WARN, "link degraded (bad frames, device errors or timeouts)"
+            level, message = DiagnosticStatus.WARN, "link degraded (bad frames, device errors or timeouts)"
         elif h.watchdog_active:
-            st.level, st.message = DiagnosticStatus.WARN, "no commands: holding/ramping to v_safe"
+            level, message = DiagnosticStatus.WARN, "no commands: holding/ramping to v_safe"
         else:
-            st.level, st.message = DiagnosticStatus.OK, "running"
+            level, message = DiagnosticStatus.OK, "running"
         self._prev_io_errors = self.io_errors
         kv = {"state": h.state, "port": self.cfg.port, "protocol": self.cfg.protocol, "identity": h.identity,
               "connects": h.connects, "disconnects": h.disconnects, "handshake_failures": h.handshake_failures,
@@ -319,10 +318,8 @@ class DriverNode(AtomicParametersNode):
         if app:
             kv.update({"apply_ms.p50": app[len(app) // 2] * 1e3, "apply_ms.p95": app[int(0.95 * (len(app) - 1))] * 1e3,
                        "apply_ms.max": app[-1] * 1e3})
-        st.values = [KeyValue(key=k, value=f"{v:.6g}" if isinstance(v, float) else str(v)) for k, v in kv.items()]
-        arr = DiagnosticArray(status=[st])
-        arr.header.stamp = self.get_clock().now().to_msg()
-        return arr
+        st = diagnostic_status("hyst_driver: stage link", h.identity or self.cfg.port, level, message, kv)
+        return diagnostic_array(self, [st])
 
 
 #: Exit code when the output could not be confirmed at ``v_safe`` on the way out (the device may hold a voltage).

@@ -39,7 +39,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from sensor_msgs.msg import JointState
@@ -47,7 +47,7 @@ from sensor_msgs.msg import JointState
 from .core import mbw_rest_state, mbw_step
 from .errors import HystError
 from .model import MBWModel, Model
-from hyst_common.node import AtomicParametersNode, fp_range, int_range, run_node
+from hyst_common.node import AtomicParametersNode, diagnostic_array, diagnostic_status, fp_range, int_range, run_node
 from .spec import build_model
 
 __all__ = ["ResidualNode", "ResidualSettings", "main"]
@@ -307,15 +307,11 @@ class ResidualNode(AtomicParametersNode):
         """Counts on ``/diagnostics`` every second; WARN while states are being ignored."""
         new_bad = self._n["bad_states"] - self._n_seen["bad_states"]
         self._n_seen = dict(self._n)
-        st = DiagnosticStatus(name="hyst_residual", hardware_id="stage")
-        st.level = DiagnosticStatus.WARN if new_bad else DiagnosticStatus.OK
-        st.message = (f"{new_bad} state(s) ignored in the last second (non-finite or implausible effort)" if new_bad
-                      else f"model {self._settings.model.name}")
-        st.values = [KeyValue(key=k, value=str(v)) for k, v in self._n.items()]
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st]
-        self._diag_pub.publish(arr)
+        message = (f"{new_bad} state(s) ignored in the last second (non-finite or implausible effort)" if new_bad
+                   else f"model {self._settings.model.name}")
+        st = diagnostic_status("hyst_residual", "stage", DiagnosticStatus.WARN if new_bad else DiagnosticStatus.OK,
+                               message, self._n)
+        self._diag_pub.publish(diagnostic_array(self, [st]))
 
 
 def main(args=None) -> int:

@@ -43,7 +43,7 @@ import threading
 import time
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import (ParameterDescriptor, ParameterType,
                                 SetParametersResult)
 from rclpy._rclpy_pybind11 import RCLError  # what a failed publish raises; rclpy exports it nowhere public
@@ -51,7 +51,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from hyst_common.limits import beyond_span
-from hyst_common.node import KEEP_ALL_RELIABLE, AtomicParametersNode, fp_range, int_range, run_node
+from hyst_common.node import (KEEP_ALL_RELIABLE, AtomicParametersNode, diagnostic_array, diagnostic_status, fp_range,
+                              int_range, run_node)
 from hyst_common.runtime import RT_PRIORITY_MAX, set_realtime
 
 from .errors import SimError
@@ -414,12 +415,9 @@ class SimNode(AtomicParametersNode):
         if d["end_stop"]:
             problems.insert(0, f"FAULT: stage on its end stop in {d['end_stop']} samples (the input drives the "
                                "model outside its travel)")
-        st = DiagnosticStatus()
-        st.level = DiagnosticStatus.ERROR if d["end_stop"] else (
+        level = DiagnosticStatus.ERROR if d["end_stop"] else (
             DiagnosticStatus.WARN if problems else DiagnosticStatus.OK)
-        st.name = "hyst_sim: stage"
-        st.hardware_id = f"sim:{s.profile}"
-        st.message = "; ".join(problems) if problems else (
+        message = "; ".join(problems) if problems else (
             "waiting for commands" if self._cmd is None and self._k <= 1 else "ok")
         vals = {"mode": s.mode, "rate_hz": f"{s.rate:g}", "achieved_rate_hz": f"{d['samples'] / _DIAG_PERIOD:g}",
                 "samples": c["samples"], "v_applied": f"{self._plant.u_applied:.6g}",
@@ -428,24 +426,19 @@ class SimNode(AtomicParametersNode):
                 "malformed_commands": c["bad_messages"],
                 "stale_commands": c["stale"], "timeouts": c["timeouts"], "missed_periods": c["late_ticks"],
                 "end_stop_samples": c["end_stop"], "waits_for_slow_subscribers": c["waits"]}
-        st.values = [KeyValue(key=k, value=str(v)) for k, v in vals.items()]
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st, self._timing_status(d)]
-        self._diag_pub.publish(arr)
+        st = diagnostic_status("hyst_sim: stage", f"sim:{s.profile}", level, message, vals)
+        self._diag_pub.publish(diagnostic_array(self, [st, self._timing_status(d)]))
 
     def _timing_status(self, d: dict) -> DiagnosticStatus:
         """The sampler's timing on its own status, so a late sampler does not mask the stage's level."""
         share = d["late_ticks"] / max(1, d["late_ticks"] + d["samples"])
-        st = DiagnosticStatus(name="hyst_sim: timing", hardware_id=f"sim:{self._settings.profile}")
-        st.level = DiagnosticStatus.ERROR if share > _MISSED_ERROR else (
+        level = DiagnosticStatus.ERROR if share > _MISSED_ERROR else (
             DiagnosticStatus.WARN if d["late_ticks"] else DiagnosticStatus.OK)
-        st.message = (f"{d['late_ticks']} missed periods ({100 * share:.0f} % of the last {_DIAG_PERIOD:g} s)"
-                      if d["late_ticks"] else "no missed periods")
-        st.values = [KeyValue(key=k, value=str(v)) for k, v in (
-            ("missed_periods", self._counts["late_ticks"]), ("missed_share", f"{share:.3f}"),
-            ("achieved_rate_hz", f"{d['samples'] / _DIAG_PERIOD:g}"))]
-        return st
+        message = (f"{d['late_ticks']} missed periods ({100 * share:.0f} % of the last {_DIAG_PERIOD:g} s)"
+                   if d["late_ticks"] else "no missed periods")
+        return diagnostic_status("hyst_sim: timing", f"sim:{self._settings.profile}", level, message, {
+            "missed_periods": self._counts["late_ticks"], "missed_share": f"{share:.3f}",
+            "achieved_rate_hz": f"{d['samples'] / _DIAG_PERIOD:g}"})
 
     @property
     def counts(self) -> dict:
