@@ -108,6 +108,10 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+#: How a yes/no gain may be written on the command line.
+_BOOL = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
+
+
 def _gains(args: argparse.Namespace, classes: dict, base=None):
     """The algorithm's gains with ``--gain`` overrides and ``--thesis-rate`` applied over ``base`` (default the
     law's defaults); None = the law's defaults unchanged."""
@@ -124,11 +128,19 @@ def _gains(args: argparse.Namespace, classes: dict, base=None):
             raise ConfigError(f"--gain {item!r}: {args.algorithm} gains are {', '.join(names)}")
         if name in kw:  # the last one won silently (hyst fit refuses a repeated --config alike)
             raise ConfigError(f"--gain {name} given twice; give each gain once")
+        if names[name] in (bool, "bool"):
+            flag = _BOOL.get(value.strip().lower())
+            if flag is None:  # "on", "2", "ture" were read as false, silently
+                raise ConfigError(f"--gain {item!r}: true or false is expected")
+            kw[name] = flag
+            continue
         try:
-            kw[name] = value.lower() in ("1", "true", "yes") if names[name] in (bool, "bool") else float(value)
+            kw[name] = float(value)
         except ValueError:
             raise ConfigError(f"--gain {item!r}: a number is expected") from None
     if args.thesis_rate and "exact_rate" in names:
+        if kw.get("exact_rate") is True:
+            raise ConfigError("--thesis-rate and --gain exact_rate=true contradict each other; give one")
         kw["exact_rate"] = False
     if base is not None:
         return dataclasses.replace(base, **kw)
@@ -146,6 +158,9 @@ def _read_params(path: str):
 def _params_model(spec, path: str, rate: float):
     """Base MBW and compensation of a params file; its ``dt`` must match the loop rate."""
     mdt = spec.config.get("dt")
+    if not mdt:
+        print(f"hyst track: note: {path} gives no model.dt, so whether its model was identified at the loop's "
+              f"{rate:g} Hz was not checked (the MBW recursion is per sample)", file=sys.stderr)
     if mdt and not same_rate(float(mdt), rate):
         raise ConfigError(f"{path} was identified at dt = {float(mdt):g} s: run with --rate {1.0 / float(mdt):g} "
                           "(the MBW recursion is per sample)")

@@ -38,7 +38,10 @@ def test_gain_overrides_reproduce_table_5_6_trend_from_cs3(capsys):
                                   ["track", "--algorithm", "pid", "--initial", "cs1"],  # ignored silently before
                                   ["track", "--algorithm", "pid", "--thesis-rate"],
                                   ["track", "--no-effects"],  # without --params: ignored silently before
-                                  ["track", "--algorithm", "pid", "--gain", "ki=0.5", "--gain", "ki=0.7"]])
+                                  ["track", "--algorithm", "pid", "--gain", "ki=0.5", "--gain", "ki=0.7"],
+                                  ["track", "--gain", "exact_rate=on"],  # read as false before
+                                  ["track", "--gain", "exact_rate=2"],
+                                  ["track", "--thesis-rate", "--gain", "exact_rate=true"]])  # rate taken silently
 def test_bad_input_is_one_line_and_exit_2(argv, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()

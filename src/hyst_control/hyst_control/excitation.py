@@ -36,7 +36,7 @@ from hyst_common.profiles import rest_voltage
 from .errors import ConfigError
 
 __all__ = ["PARTS", "DEFAULT_PARTS", "BAND_PARTS", "PERIODIC_PARTS", "DEFAULT_RATE", "MIN_RATE", "MAX_RATE",
-           "ExcitationSpec", "Excitation", "build_excitation", "from_samples"]
+           "MAX_SECONDS", "ExcitationSpec", "Excitation", "build_excitation", "from_samples"]
 
 #: Every part :func:`build_excitation` can play.
 PARTS = ("steps", "sines", "triangles", "multisine", "sweep", "noise")
@@ -48,6 +48,9 @@ DEFAULT_PARTS = ("steps", "sines", "triangles", "multisine", "sweep")
 #: Sample rate (Hz) of ``hyst excite`` and ``hyst_excite_node`` when none is given, and the range both take.
 DEFAULT_RATE = 1000.0
 MIN_RATE, MAX_RATE = 1.0, 5000.0
+#: Longest excitation built (s): an hour of identification. A longer one was an allocation of tens of GiB (a
+#: traceback, or the process killed by the kernel) from one mistyped option (``--hold 1e6``).
+MAX_SECONDS = 3600.0
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,29 @@ class ExcitationSpec:
             raise ConfigError(f"frequency must be in (0, {nyq:g}) Hz, got {self.frequency:g}")
         if self.periods < 1 or self.n_steps < 1 or self.hold < 0 or self.seconds <= 0 or not self.step_rise >= 0:
             raise ConfigError("periods and n_steps must be >= 1, hold >= 0 s, step_rise >= 0 s, seconds > 0 s")
+        length = self.samples * self.dt
+        if length > MAX_SECONDS:
+            raise ConfigError(f"the excitation would last {length:.4g} s ({self.samples:.4g} samples); at most "
+                              f"{MAX_SECONDS:g} s is built (check hold, periods, n_steps, step_rise, frequency, "
+                              "seconds)")
+
+    @property
+    def samples(self) -> int:
+        """How many samples :func:`build_excitation` makes of this spec, counted before building (float-safe
+        for absurd settings: the check above refuses them before any array exists)."""
+        def n(sec: float) -> float:
+            return float(round(sec / self.dt))
+        hold = max(1.0, n(self.hold))
+        total = hold
+        for part in self.parts:
+            if part == "steps":
+                total += (self.n_steps + 1) * (n(self.step_rise) + hold)
+            elif part in PERIODIC_PARTS:
+                total += len(self.amplitudes) * (round(self.periods / (self.frequency * self.dt)) + 1)
+            else:
+                total += n(self.seconds) + 1
+            total += hold
+        return int(min(total, 1e18))
 
     @property
     def rest(self) -> float:

@@ -107,3 +107,18 @@ def test_samples_breaking_a_limit_are_refused_with_the_reason(change, match):
     t, u = change(ex.t.copy(), ex.u.copy())
     with pytest.raises(ConfigError, match=match):
         from_samples(t, u, spec)
+
+
+@pytest.mark.parametrize("parts", [("steps",), ("sines", "triangles"), ("multisine", "sweep", "noise")])
+@pytest.mark.parametrize("dt", [1e-3, 1 / 1234.5])
+def test_the_length_is_known_before_building(parts, dt):
+    spec = ExcitationSpec(parts=parts, amplitudes=(0.2, 0.5, 1.0), dt=dt, hold=0.37, step_rise=0.013, periods=2,
+                          frequency=3.3, n_steps=5, seconds=1.1, f_lo=1.0, f_hi=50.0)
+    assert build_excitation(spec).u.size == spec.samples
+
+
+@pytest.mark.parametrize("kw", [{"hold": 1e6}, {"seconds": 1e7}, {"periods": 10**9}, {"n_steps": 10**9},
+                                {"step_rise": 1e9}, {"frequency": 1e-9}])
+def test_an_excitation_beyond_an_hour_is_refused_before_any_array(kw):
+    with pytest.raises(ConfigError, match="at most 3600 s"):
+        ExcitationSpec(**kw)

@@ -84,7 +84,7 @@ def test_not_a_bag(tmp_path):
     with pytest.raises(DataError, match="no such"):
         read_state_bag(tmp_path / "nothing")
     (tmp_path / "d").mkdir()
-    with pytest.raises(DataError, match="cannot open bag"):
+    with pytest.raises(DataError, match="not a bag .a rosbag2 directory holds metadata.yaml"):
         read_state_bag(tmp_path / "d")
 
 

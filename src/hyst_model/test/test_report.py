@@ -104,3 +104,37 @@ def test_another_commands_report_needs_force_and_a_rerun_leaves_no_stale_plot(tm
     check_report_dir(d, kind="diagnose")  # the same command's re-run is fine
     write_report(d, rec, yhat, st, kind="compare", force=True)
     assert not (d / "ladder.png").exists() and "hyst compare" in (d / MARKER).read_text()
+
+
+def test_an_interrupted_report_leaves_nothing_and_keeps_the_previous_one(tmp_path, monkeypatch):
+    """Ctrl-C while plotting left a directory of PNGs without index.html (and, in diagnose, a params file)."""
+    import os
+    import stat
+
+    import hyst_model.diagnose.report as report
+
+    rec, yhat = _record()
+    st = compare_stats(rec.t, rec.u, rec.y, yhat)
+    real = report._plots
+
+    def interrupted(d, *a):
+        real(d, *a)  # every plot is on disk, index.html not yet
+        raise KeyboardInterrupt
+    monkeypatch.setattr(report, "_plots", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_report(tmp_path / "new", rec, yhat, st)
+    assert list(tmp_path.iterdir()) == []  # neither the report nor its staging directory
+    monkeypatch.setattr(report, "_plots", real)
+    d = write_report(tmp_path / "old", rec, yhat, st, ladder=[{"model": "mbw", "rmse": 3e-7}])
+    before = {p.name: p.read_bytes() for p in d.iterdir()}
+    assert "ladder.png" in before
+    assert stat.S_IMODE(d.stat().st_mode) == 0o777 & ~report.user_umask()  # as mkdir makes it, not mkdtemp's 0700
+    monkeypatch.setattr(report, "_plots", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_report(d, rec, yhat, st)
+    assert {p.name: p.read_bytes() for p in d.iterdir()} == before
+    assert sorted(os.listdir(tmp_path)) == ["old"]
+    monkeypatch.setattr(report, "_plots", real)
+    write_report(d, rec, yhat, st)  # a re-run without a ladder: the old ladder plot goes, the rest is replaced
+    assert not (d / "ladder.png").exists() and (d / "index.html").read_bytes() != before["index.html"]
+    assert sorted(os.listdir(tmp_path)) == ["old"]

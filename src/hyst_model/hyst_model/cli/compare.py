@@ -48,7 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="Python file with user effects the params file uses (repeatable)")
     p.add_argument("--any-rate", action="store_true",
                    help="compare a record sampled at another rate than the model was fitted at (as hyst simulate)")
-    p.add_argument("--levels", type=positive_int, default=5, help="number of input-level bins (default 5)")
+    p.add_argument("--levels", type=positive_int, default=5, help="number of input-level bins (default 5, at most 100)")
     p.add_argument("--lags", type=positive_int, default=25, help="lags of the correlation tests (default 25)")
     from .fit import add_data_options
     add_data_options(p)  # --topic, --columns, --units, --gaps, --salvage, --resample: as fit and diagnose
@@ -69,6 +69,10 @@ def _window(text: str | None) -> tuple[float, float]:
     if not t1 > t0:
         raise DataError(f"--window {text!r} is empty")
     return t0, t1
+
+
+#: Most input-level bins ``--levels`` takes.
+MAX_LEVELS = 100
 
 
 def compare_record(record, model, theta, *, n_levels: int = 5, max_lag: int = 25,
@@ -171,6 +175,8 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of ``hyst compare``; returns the exit code."""
     if args.levels < 1 or args.lags < 1:
         raise DataError("--levels and --lags must be at least 1")
+    if args.levels > MAX_LEVELS:  # 100 000 bins printed 100 031 lines of empty bins, silently
+        raise DataError(f"--levels {args.levels}: at most {MAX_LEVELS} input-level bins (one table line each)")
     window = _window(args.window)
     if args.report:  # judged before the work, as the writer will
         from ..diagnose.report import check_report_dir
@@ -178,6 +184,9 @@ def run(args: argparse.Namespace) -> int:
     spec, rec, model, theta = _load(args)
     notes = []
     dt_fit = spec.config.get("dt")
+    if not dt_fit and not args.any_rate:
+        notes.append(f"note: {args.params} gives no model.dt, so whether the record ({1 / rec.dt:.6g} Hz) is sampled "
+                     "at the model's rate was not checked (a per-sample model is only valid there)")
     if isinstance(dt_fit, (int, float)) and dt_fit > 0 and abs(rec.dt / dt_fit - 1.0) > 0.02:
         if not args.any_rate:  # as hyst simulate: the per-sample model's error there is the rate's, not the model's
             raise DataError(f"{args.data} is sampled at {1 / rec.dt:.6g} Hz but the model was identified at "

@@ -32,7 +32,7 @@ def register(subparsers) -> None:
         epilog="exit status: 0 effect named or none missing; 3 unexplained; 2 bad input")
     p.add_argument("data", metavar="DATA", help="rosbag2 directory / .mcap file (/stage/state) or CSV file")
     p.add_argument("--base", default="mbw", choices=("mbw", "bw"), help="base model (default mbw)")
-    p.add_argument("--effects", default="", help="only test these effects (comma-separated; default all)")
+    p.add_argument("--effects", default=None, help="only test these effects (comma-separated; default all)")
     p.add_argument("--effect-module", action="append", default=[], metavar="PATH",
                    help="Python file defining extra Effect classes (repeatable)")
     p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
@@ -114,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
 
     for path in args.effect_module:
         load_effect_module(path)
-    names = [s.strip() for s in args.effects.split(",") if s.strip()] or None
+    from .fit import parse_effects
+    names = parse_effects(args.effects) if args.effects is not None else None
     if names and len(set(names)) != len(names):
         raise EffectError("--effects lists an effect twice")
     from ..effects import EFFECTS
@@ -145,6 +146,23 @@ def run(args: argparse.Namespace) -> int:
                 print(f"hyst diagnose: {best.model} refitted with Remark 4.1 and passive rate terms (ψ ≥ 0): "
                       f"validation RMSE {fmt_len(con.rmse)} (as diagnosed {fmt_len(best.rmse)}, outside them)",
                       file=sys.stderr)
+    # The report first: it takes seconds to plot, and a Ctrl-C there must not leave a params file behind.
+    report_path = None
+    if args.report:
+        try:
+            from ..diagnose import report as _report
+        except ImportError:
+            print("hyst diagnose: note: the HTML report module is not available; no report written",
+                  file=sys.stderr)
+        else:
+            from .compare import compare_record
+            model, theta = d.models[d.base]
+            rec2, yhat, st = compare_record(rec, model, theta)
+            out = _report.write_report(args.report, rec2, yhat, st,
+                                       ladder=[_clean(r.__dict__) for r in d.ladder],
+                                       diagnosis=_clean(d.to_json()), force=args.force, kind="diagnose",
+                                       title=f"hyst diagnose: {rec.source} (plots: base model {d.base})")
+            report_path = str(out / "index.html")
     out_path = None
     if args.out:
         from ..io import spec_from_model, write_params
@@ -162,22 +180,6 @@ def run(args: argparse.Namespace) -> int:
             from ..identify.admissible import provenance
             prov["admissible"] = provenance(constrained["free_rmse"])
         out_path = str(write_params(args.out, spec_from_model(model, theta, fit=prov, dt=rec.dt), force=args.force))
-    report_path = None
-    if args.report:
-        try:
-            from ..diagnose import report as _report
-        except ImportError:
-            print("hyst diagnose: note: the HTML report module is not available; no report written",
-                  file=sys.stderr)
-        else:
-            from .compare import compare_record
-            model, theta = d.models[d.base]
-            rec2, yhat, st = compare_record(rec, model, theta)
-            out = _report.write_report(args.report, rec2, yhat, st,
-                                       ladder=[_clean(r.__dict__) for r in d.ladder],
-                                       diagnosis=_clean(d.to_json()), force=args.force, kind="diagnose",
-                                       title=f"hyst diagnose: {rec.source} (plots: base model {d.base})")
-            report_path = str(out / "index.html")
     if args.json:
         obj = _clean(d.to_json())
         obj["data"] = rec.source

@@ -103,7 +103,8 @@ def register(subparsers) -> None:
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data", help="rosbag2 directory, .mcap file, or CSV")
     p.add_argument("--model", default="mbw", help="base model: mbw (default), bw, pi")
-    p.add_argument("--effects", default="", help="comma-separated effects composed onto the base, e.g. creep,delay")
+    p.add_argument("--effects", default=None,
+                   help="comma-separated effects composed onto the base, e.g. creep,delay (default none)")
     p.add_argument("--method", choices=tuple(METHODS), default="fast", help="identifier (default fast)")
     p.add_argument("--seed", type=nonneg_int, default=None, help="random seed (EPSO)")
     p.add_argument("--iterations", type=positive_int, default=None, help="EPSO iterations (default 200)")
@@ -130,6 +131,18 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def parse_effects(text: str | None) -> list[str]:
+    """``--effects A,B`` as a list; None (not given) is no effects. An empty name (``""``, ``a,,b``, ``,``) is
+    refused: it used to mean "no effects" to fit and "every effect" to diagnose, silently."""
+    if text is None:
+        return []
+    names = [e.strip() for e in text.split(",")]
+    if not all(names):
+        raise ParamsError(f"--effects {text!r} has an empty name; list effects separated by commas, or leave the "
+                          "option out")
+    return names
+
+
 def run(args) -> int:
     from ..io.outputs import check_output
     if args.out:  # fail before the imports and a long fit, not after them
@@ -145,7 +158,7 @@ def run(args) -> int:
     from ..effects import load_effect_module
     for path in args.effect_module:
         load_effect_module(path)
-    effects = [e.strip() for e in args.effects.split(",") if e.strip()]
+    effects = parse_effects(args.effects)
     _check_options(args)
     split = parse_split(args.train, args.val_fraction, args.split)
     user_cfg = parse_config(args.config, effects)

@@ -65,6 +65,9 @@ def run(args) -> int:
                             "would run across as if no time had passed; give a regularly sampled input (hold the "
                             "voltage through a gap) or split the file")
     dt_fit = spec.config.get("dt")
+    if not dt_fit and not args.any_rate:  # an old or hand-written file: say the check was not made
+        print(f"hyst simulate: note: {args.params} gives no model.dt, so whether {args.input} is sampled at the "
+              "model's rate was not checked (a per-sample model is only valid there)", file=sys.stderr)
     if t.size > 1 and dt_fit and not args.any_rate:
         dt = float(np.median(np.diff(t)))
         if abs(dt - float(dt_fit)) > 0.01 * float(dt_fit):

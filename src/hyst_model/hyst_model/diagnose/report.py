@@ -7,7 +7,8 @@ API (stable; ``hyst diagnose`` calls it)::
 
 * ``dir`` — output directory (created). It is refused (:class:`~hyst_model.errors.HystError`) when it already
   holds files that hyst did not write (no ``.hyst-report`` marker), unless ``force``; a previous hyst report in
-  it is replaced. Files are written to temporaries and renamed, so a crash never leaves half a PNG.
+  it is replaced. The report is written into a hidden directory beside ``dir`` and moved in whole at the
+  end, so a crash or a Ctrl-C never leaves half a report.
 * ``record`` — :class:`hyst_model.io.Record` (``t`` s, ``u`` V, ``y`` m, ``source``).
 * ``model_output`` — model output (m), same length as ``record.y``.
 * ``stats`` — :class:`hyst_model.diagnose.stats.CompareStats` of that output.
@@ -23,13 +24,15 @@ from __future__ import annotations
 
 import html
 import os
+import shutil
+import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..io.modes import mkstemp_user
+from ..io.modes import mkstemp_user, user_umask
 from ..errors import HystError
 
 __all__ = ["write_report", "findings", "MARKER", "prepare_dir", "check_report_dir"]
@@ -361,7 +364,43 @@ def write_report(dir: str | os.PathLike, record, model_output: np.ndarray, stats
     yhat = np.asarray(model_output, float)
     if not (t.size == u.size == y.size == yhat.size) or t.size < 8:
         raise HystError("report: record and model output must have the same length (at least 8 samples)")
-    d = prepare_dir(dir, force, kind)
+    target = check_report_dir(dir, force, kind)
+    # Everything is written into a hidden directory beside the target and moved in at the end: a Ctrl-C or a
+    # failure while plotting (seconds) left a report without index.html, or beside a params file already written.
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        d = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".staging", dir=target.parent))
+    except OSError as err:
+        raise HystError(f"cannot create report directory {target}: {err}") from err
+    try:
+        _write_into(d, t, u, y, yhat, record, stats, ladder, diagnosis, title)
+        (d / MARKER).write_text(f"written by hyst {kind}; files listed in index.html are replaced on the next "
+                                f"{kind} report\n")
+        _commit(d, target)
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+    return target
+
+
+def _commit(stage: Path, target: Path) -> None:
+    """Move the finished report from ``stage`` into ``target``: by one rename where it is new, else file by file
+    (index.html last) after removing the previous report's plots that this one does not have."""
+    if not target.exists():
+        os.chmod(stage, 0o777 & ~user_umask())  # mkdtemp makes it 0700; a plain mkdir would not
+        os.rename(stage, target)
+        return
+    try:
+        for name in _OURS - {MARKER}:
+            if not (stage / name).exists():
+                (target / name).unlink(missing_ok=True)
+        for p in sorted(stage.iterdir(), key=lambda p: p.name == "index.html"):
+            os.replace(p, target / p.name)
+    except OSError as err:
+        raise HystError(f"cannot replace the report in {target}: {err}") from err
+
+
+def _write_into(d: Path, t, u, y, yhat, record, stats, ladder, diagnosis, title) -> None:
+    """The plots and index.html of :func:`write_report`, into directory ``d``."""
     figs = _plots(d, t, u, y, yhat, stats, ladder)
     st = stats
     o = st.overall
@@ -411,4 +450,3 @@ def write_report(dir: str | os.PathLike, record, model_output: np.ndarray, stats
     with os.fdopen(fd, "w", encoding="utf-8") as fh:
         fh.write(doc)
     os.replace(tmp, d / "index.html")
-    return d

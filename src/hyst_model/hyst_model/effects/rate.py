@@ -36,13 +36,14 @@ class Rate(Effect):
     def check(self, base, others):
         if getattr(base, "name", "") == "mbw":
             raise EffectError("effect 'rate' is already part of the mbw base (its zeta2, psi2, alpha2 terms); "
-                              "use --base bw to test it")
+                              "test it on the bw base (hyst fit --model bw, hyst diagnose --base bw)")
         super().check(base, others)
 
     def apply(self, theta, t, u, inner):
         to_params = getattr(inner.model, "to_params", None)
         if to_params is None:
-            raise EffectError("effect 'rate' needs a Bouc-Wen base model (--base bw)")
+            raise EffectError("effect 'rate' needs the Bouc-Wen base model bw (hyst fit --model bw, "
+                              "hyst diagnose --base bw)")
         p = to_params(inner.theta).replace(zeta2=float(theta[0]), psi2=float(theta[1]), alpha2=float(theta[2]))
         return p.simulate(u)
 

@@ -35,6 +35,8 @@ def load_effect_module(path: str | Path) -> list[str]:
         always one message naming the file and the problem.
     """
     p = Path(path)
+    if p.is_dir():
+        raise EffectError(f"effect module {p} is a directory; give the .py file that defines the Effect")
     if not p.is_file():
         raise EffectError(f"effect module {p}: no such file")
     if p.suffix != ".py":

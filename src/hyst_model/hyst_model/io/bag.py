@@ -78,6 +78,14 @@ def _open_reader(path: Path):
         raise DataError(f"{path}: no such bag (expected a rosbag2 directory or a .mcap file)")
     if path.is_file() and path.suffix != ".mcap":
         raise DataError(f"{path}: not a bag (expected a rosbag2 directory or a single .mcap file)")
+    if path.is_dir() and not (path / "metadata.yaml").exists() and not any(path.glob("*.mcap")):
+        # --salvage would find nothing to read here; say what the directory is instead
+        inner = sorted(d.name for d in path.iterdir() if d.is_dir() and ((d / "metadata.yaml").exists()
+                                                                          or any(d.glob("*.mcap"))))
+        if inner:
+            shown = ", ".join(inner[:5]) + (", ..." if len(inner) > 5 else "")
+            raise DataError(f"{path} is a folder of bags ({shown}); give one bag directory")
+        raise DataError(f"{path}: not a bag (a rosbag2 directory holds metadata.yaml and .mcap files)")
     try:
         reader = AnyReader([path], default_typestore=_typestore())
         reader.open()

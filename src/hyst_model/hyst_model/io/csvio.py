@@ -69,6 +69,15 @@ def _read_columns(path: Path, columns: tuple[str, ...], units: tuple[str, ...] |
     if not lines or not lines[0].strip():
         raise DataError(f"{path}: empty file (expected a header row such as {','.join(quantities)})")
     header = [h.strip() for h in lines[0].split(",")]
+    if all(len(h) >= 2 and h[0] == h[-1] == '"' for h in header):  # "t","u","y": a spreadsheet's quoting
+        header = [h[1:-1].strip() for h in header]
+    roles = [c for c in columns if columns.count(c) > 1]
+    if roles:  # --columns t,t,y read the time as the voltage, silently
+        raise DataError(f"{path}: --columns names {roles[0]} for more than one of {', '.join(quantities)}; "
+                        "name one column for each")
+    twice = [c for c in columns if header.count(c) > 1]
+    if twice:  # which one is meant cannot be known: the first was taken, silently
+        raise DataError(f"{path}: the header has the column {twice[0]} more than once; rename one of them")
     missing = [c for c in columns if c not in header]
     if missing:
         hint = (" (name the columns with --columns and their units with --units)"
