@@ -111,3 +111,21 @@ def test_bad_gains_and_initials_rejected():
         DMRAC(pea_default(), 5e-4, initial="cs9")
     with pytest.raises(ConfigError):
         DMRAC(pea_default(), 5e-4, initial=(1, 2, 3))
+
+
+def test_thesis_rate_is_that_of_the_reference_model_input():
+    """(5.4): r_{u,k} = |r_k − r_{k−1}| with r the input of the reference model (5.3), recovered from the desired
+    trajectory as r_k = y_{d,k} − a_m·y_{d,k−1}; it was |y_{d,k} − y_{d,k−1}|, 1/(1 − a_m) times as large."""
+    from hyst_control.base import invert_nu
+    from hyst_control.dmrac import _dmrac_law
+    from hyst_model.core import pea_default
+
+    c = DMRAC(pea_default(), 5e-4, DMRACGains(exact_rate=False, a_m=0.5))
+    pe, th = c._pe.copy(), c._th.copy()
+    yd, ydp, ydpp, y, u_p, a_m = 2.0, 1.7, 1.5, 1.6, 3.0, 0.5
+    nu, _ = _dmrac_law(pe, th, False, y, u_p, math.nan, math.nan, yd, ydp, ydpp, a_m, 0.01, 0.01, 1e-3, 1e-4,
+                       10.0, 0.0, False)
+    r_k, r_prev = yd - a_m * ydp, ydp - a_m * ydpp
+    y_r = r_k - (pe[6] - a_m) * y
+    assert nu == invert_nu(pe, y, y_r, u_p, abs(r_k - r_prev), False, 1e-3)
+    assert nu != invert_nu(pe, y, y_r, u_p, abs(yd - ydp), False, 1e-3)  # the old rate gives another ν

@@ -75,7 +75,8 @@ def register(subparsers) -> None:
                    help="relative model error of the controller's model, e.g. 0.2 (default 0)")
     p.add_argument("--initial", default="model", help="DMRAC initial estimates: model, cs0, cs1, cs2, cs3")
     p.add_argument("--thesis-rate", action="store_true",
-                   help="DPPC/DMRAC: use the reference rate r_u (4.3)/(5.4) instead of the exact input rate")
+                   help="DPPC/DMRAC: invert μ with the reference rate r_u (4.3)/(5.4) instead of the exact input "
+                        "rate (DMRAC's adaptation keeps the applied input's rate: hyst_control.dmrac)")
     p.add_argument("--gain", action="append", default=[], metavar="NAME=VALUE",
                    help="set one gain of the algorithm (repeatable), e.g. --gain kappa1=0.5 --gain a_m=0.3; names "
                         "as the controller node's <algorithm>.<name> parameters")

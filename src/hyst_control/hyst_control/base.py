@@ -119,9 +119,11 @@ def invert_nu(p: np.ndarray, y_prev: float, y_r: float, u_prev: float, r_u: floa
 def check_model(model: MBWParams) -> MBWParams:
     """Validate a model for control use; raise :class:`ConfigError` with the reason.
 
-    Requires finite values, ζ1 > 0 and ζ2 ≥ 0 (Assumption 4.1), 0 < δ1, δ2 < 1 (bounded u in the proofs of
-    Theorems 4.1/5.1), positive scales. Remark 4.1 (α_i < −|ψ_i|) is reported by :attr:`MBWParams.control_positive`
-    but not required: :func:`mu_select` floors μ instead.
+    Requires finite values, ζ1 > 0 and ζ2 ≥ 0 (Assumption 4.1), 0 < δ2 < 1 (the proofs of Theorems 4.1/5.1 bound
+    u_k with it, after (4.21) and (5.39)) and 0 < δ1 < 1 (hyst's own requirement: with δ1 ≥ 1 the model's output
+    does not relax at rest — δ1 = 1 holds it for ever, above 1 it grows), positive scales. Remark 4.1
+    (α_i < −|ψ_i|) is reported by :attr:`MBWParams.control_positive` but not required: :func:`mu_select` floors μ
+    instead.
     """
     vals = model.to_dict()
     bad = [k for k, v in vals.items() if not math.isfinite(v)]
@@ -130,7 +132,8 @@ def check_model(model: MBWParams) -> MBWParams:
     if not model.zeta1 > 0 or model.zeta2 < 0:
         raise ConfigError("model needs zeta1 > 0 and zeta2 >= 0 (thesis Assumption 4.1)")
     if not (0 < model.delta1 < 1 and 0 < model.delta2 < 1):
-        raise ConfigError("model needs 0 < delta1, delta2 < 1 for a bounded control input (Theorems 4.1, 5.1)")
+        raise ConfigError("model needs 0 < delta2 < 1 for a bounded control input (Theorems 4.1, 5.1) and "
+                          "0 < delta1 < 1 (a model that relaxes at rest)")
     if not (model.u_scale > 0 and model.y_scale > 0):
         raise ConfigError("model u_scale and y_scale must be positive")
     return model

@@ -160,7 +160,7 @@ def dmrac_adapt(th, eps, nu, y_pp, v, k1, k2, zeta0, varrho, tmax):
 
 
 @njit(cache=True)
-def _dmrac_law(pe, th, have_past, y_m, u_p, y_pp, u_pp, yd_m, ydp_m, a_m, k1, k2, zeta0, varrho, tmax, dz,
+def _dmrac_law(pe, th, have_past, y_m, u_p, y_pp, u_pp, yd_m, ydp_m, ydpp_m, a_m, k1, k2, zeta0, varrho, tmax, dz,
                exact):
     """One DMRAC sample in model units (one compiled call: the step-cost budget is ~20 µs in Python).
 
@@ -174,8 +174,8 @@ def _dmrac_law(pe, th, have_past, y_m, u_p, y_pp, u_pp, yd_m, ydp_m, a_m, k1, k2
         if abs(eps) > dz:
             dmrac_adapt(th, eps, u_p - pe[7] * u_pp, y_pp, abs(u_p - u_pp), k1, k2, zeta0, varrho, tmax)
     pe[:6] = th
-    r_model = yd_m - a_m * ydp_m  # (5.3) solved for the reference-model input
-    r_u = abs(yd_m - ydp_m)  # (5.4) on the desired trajectory, model output scale
+    r_model = yd_m - a_m * ydp_m  # (5.3) solved for the reference-model input r_k
+    r_u = abs(r_model - (ydp_m - a_m * ydpp_m))  # (5.4): |r_k − r_{k−1}|, model output scale
     y_r = r_model - (pe[6] - a_m) * y_m  # (5.24)
     return invert_nu(pe, y_m, y_r, u_p, r_u, exact, zeta0), eps  # (5.25)-(5.27)
 
@@ -214,6 +214,7 @@ class DMRAC(ModelBased):
         self._eps = 0.0
         self._nu = 0.0
         self._yd_prev = math.nan
+        self._yd_pp = math.nan  # y_{d,k-2} (SI): r_{k-1} of (5.4)
         self._y_pp = math.nan  # y_{k-2} (model units)
         self._u_pp = math.nan  # u_{k-2} (model units)
         self._have_past = False
@@ -275,7 +276,7 @@ class DMRAC(ModelBased):
         g = self.gains
         # Make the initial estimates admissible (the projections (5.12b)–(5.17b) at k = 0).
         dmrac_adapt(self._th, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, g.zeta0, g.varrho, g.theta_max)
-        self._yd_prev = r0
+        self._yd_prev = self._yd_pp = r0  # at rest: r_{k-1} = (1 − a_m)·y_d
         self._have_past = False
         self._eps = 0.0
         self._nu = 0.0
@@ -289,11 +290,12 @@ class DMRAC(ModelBased):
         ys, us, off = self._ys, self._us, self._off
         nu, eps = _dmrac_law(
             self._pe, self._th, self._have_past, (y - off) / ys, self._u_prev / us, self._y_pp, self._u_pp,
-            (r_k - off) / ys, (self._yd_prev - off) / ys, g.a_m, g.kappa1, g.kappa2, g.zeta0, g.varrho,
-            g.theta_max, g.deadzone / ys, g.exact_rate)
+            (r_k - off) / ys, (self._yd_prev - off) / ys, (self._yd_pp - off) / ys, g.a_m, g.kappa1, g.kappa2,
+            g.zeta0, g.varrho, g.theta_max, g.deadzone / ys, g.exact_rate)
         if self._have_past:
             self._eps = eps
         self._nu = nu
+        self._yd_pp = self._yd_prev
         self._yd_prev = r_k
         self._y_pp = (y - off) / ys
         self._u_pp = self._u_prev / us

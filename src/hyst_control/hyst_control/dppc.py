@@ -15,7 +15,8 @@ Out-of-funnel policy (hyst's choice; the thesis assumes (4.8) always holds, whic
 perfect model without noise): before (4.10) is evaluated, if e_{k−1} is not strictly inside the funnel with a
 margin, i.e. outside (−ρ·h̲·λ_{k−1}, ρ·h̄·λ_{k−1}) with ρ = ``funnel_margin`` (default 0.9), Step 0 is re-run:
 λ_{k−1} is widened to |e_{k−1}|/(ρ·h) so the error sits at the margin, and (4.7) then shrinks the funnel back
-towards λ∞ at rate ω. Hence |ε| ≤ ½·ln((1+ρ)/(1−ρ)) (1.47 for ρ = 0.9): ε, ν and u are always finite and
+towards λ∞ at rate ω. Hence |ε| ≤ ½·ln((h̲ + ρ·h̄)/((1−ρ)·h̄)) on the upper side (and its mirror below); for
+h̲ = h̄ (Table 4.2) ½·ln((1+ρ)/(1−ρ)) = 1.47 for ρ = 0.9: ε, ν and u are always finite and
 bounded, whatever noise, model mismatch or bump hit the stage. Re-initialisations are counted
 (``funnel_resets`` in :meth:`DPPC.state`).
 

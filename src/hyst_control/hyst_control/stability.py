@@ -1,9 +1,11 @@
 """Stability of the linearised control loop against an identified stage resonance, and derated gains.
 
 A piezo stage's flexure resonance (model effect ``dynamics``: fn, ζ) sits after the hysteresis. The thesis's
-laws are one-step inversions of the MBW (3.21): with a perfect model their error obeys e_k = χ·e_{k−1} (DPPC,
-(4.17)–(4.21)) or e_k = a_m·e_{k−1} (DMRAC, (5.40)), i.e. a loop gain of δ1 − χ per sample, far too high in
-front of a lightly damped 350 Hz mode sampled at 2 kHz. This module forms the discrete closed loop and checks it.
+laws are one-step inversions of the MBW (3.21): with a perfect model DPPC's transformed error obeys
+ε_k = χ·ε_{k−1} (4.21) — to first order, with a settled funnel λ and h̲ = h̄, the tracking error too,
+e_k ≈ χ·e_{k−1} (the linearisation used here) — and DMRAC's e_k = a_m·e_{k−1} (5.40), i.e. a loop gain of δ1 − χ per
+sample, far too high in front of a lightly damped 350 Hz mode sampled at 2 kHz. This module forms the discrete
+closed loop and checks it.
 
 Loop, per sample k (SI; q = z⁻¹):
 

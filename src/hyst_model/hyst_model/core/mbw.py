@@ -20,8 +20,9 @@ The ν convention
 .. math::  \\nu_k = u_k - \\delta_2 u_{k-1}
 
 (Δt absorbed). The control laws (4.12) and (5.23) then read :math:`u_k = \\delta_2 u_{k-1} + \\nu_k`.
-A continuous-time parameter set (ξ, φ, γ) maps to this convention by multiplying with Δt only once, which is
-exactly what (3.18) says; see :func:`hyst_model.core.params.from_continuous`.
+A continuous-time parameter set (ξ, φ, γ) maps to this convention unchanged — ζ = ξ, ψ = φ, α = γ, no Δt
+factor: (3.18)'s Δt in ζ = Δt·ξ cancels the 1/Δt in its ν, since (3.17) is Δt·ξ·(Δu/Δt) = ξ·Δu; see
+:func:`hyst_model.core.params.from_continuous`.
 
 Units
 -----

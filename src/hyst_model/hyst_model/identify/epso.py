@@ -12,6 +12,10 @@ positions are clipped to the bounds and velocities to ±(upper − lower); δ1, 
 (3.27) does not list because the thesis fixes them) are searched too, within the model's bounds, because real data
 needs them. MBW/BW swarms are evaluated all at once with :func:`hyst_model.core.mbw.mbw_simulate_batch`; other
 models one particle at a time.
+
+The thesis contradicts itself here: Table 3.1 keeps α1 ≥ −1e-5 and ψ1 ≥ 1e-5, so no fit inside its bounds meets
+Remark 4.1 (α1 < −|ψ1|), which the control laws assume. ``hyst fit`` checks every fit against Remark 4.1 and says
+so; ``--admissible`` fits inside it.
 """
 from __future__ import annotations
 
