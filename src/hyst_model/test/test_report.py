@@ -112,6 +112,7 @@ def test_an_interrupted_report_leaves_nothing_and_keeps_the_previous_one(tmp_pat
     import stat
 
     import hyst_model.diagnose.report as report
+    from hyst_model.io.modes import user_umask
 
     rec, yhat = _record()
     st = compare_stats(rec.t, rec.u, rec.y, yhat)
@@ -128,7 +129,7 @@ def test_an_interrupted_report_leaves_nothing_and_keeps_the_previous_one(tmp_pat
     d = write_report(tmp_path / "old", rec, yhat, st, ladder=[{"model": "mbw", "rmse": 3e-7}])
     before = {p.name: p.read_bytes() for p in d.iterdir()}
     assert "ladder.png" in before
-    assert stat.S_IMODE(d.stat().st_mode) == 0o777 & ~report.user_umask()  # as mkdir makes it, not mkdtemp's 0700
+    assert stat.S_IMODE(d.stat().st_mode) == 0o777 & ~user_umask()  # as mkdir makes it, not mkdtemp's 0700
     monkeypatch.setattr(report, "_plots", interrupted)
     with pytest.raises(KeyboardInterrupt):
         write_report(d, rec, yhat, st)

@@ -32,16 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from ..io.modes import mkstemp_user, user_umask
+from ..io.modes import mkstemp_user
+from .report_dir import MARKER, check_report_dir, commit_report, prepare_dir
 from ..errors import HystError
 
 __all__ = ["write_report", "findings", "MARKER", "prepare_dir", "check_report_dir"]
-
-#: A file hyst writes into every report directory; a directory without it but with other files is not ours.
-MARKER = ".hyst-report"
-_OURS = {"index.html", "time.png", "loop.png", "residual.png", "spectrum.png", "correlation.png", "ladder.png",
-         MARKER}
-
 
 def _um(x: float) -> str:
     from ..effects.signals import fmt_len
@@ -136,70 +131,6 @@ def findings(st) -> list[str]:
     if not st.auto.significant:
         out.append("The residual is white within the 99 % bounds.")
     return out
-
-
-def _marker_kind(d: Path) -> str | None:
-    """The command whose report ``d`` holds (``compare``, ``diagnose``), None for a marker without one."""
-    try:
-        words = (d / MARKER).read_text().split()
-    except OSError:
-        return None
-    return words[3].rstrip(";") if len(words) > 3 and words[:3] == ["written", "by", "hyst"] else None
-
-
-def check_report_dir(path: str | os.PathLike, force: bool = False, kind: str = "report") -> Path:
-    """Raise now, before any work, if ``path`` cannot take the report of ``kind`` (``compare``, ``diagnose``).
-
-    Refused without ``force``: a directory holding files hyst did not write, and another command's report (``hyst
-    compare`` and ``hyst diagnose`` into one directory: the second replaced the first's report without a word).
-    The same command's report there is replaced (a re-run).
-
-    Raises
-    ------
-    HystError
-        ``path`` is a file, or a directory refused as above.
-    """
-    d = Path(path)
-    if d.exists() and not d.is_dir():
-        raise HystError(f"report directory {d} is a file")
-    if d.is_dir() and not force:
-        names = {p.name for p in d.iterdir()}
-        foreign = sorted(names - _OURS)
-        if names and MARKER not in names:
-            raise HystError(f"report directory {d} is not empty and not a hyst report "
-                            f"(e.g. {', '.join(foreign[:3]) or ', '.join(sorted(names)[:3])}); "
-                            "choose another directory or pass --force")
-        if foreign:
-            raise HystError(f"report directory {d} holds files hyst did not write ({', '.join(foreign[:3])}); "
-                            "choose another directory or pass --force")
-        other = _marker_kind(d) if MARKER in names else None
-        if other is not None and other != kind:
-            raise HystError(f"report directory {d} holds a hyst {other} report; give the {kind} report its own "
-                            "directory or pass --force to replace it")
-    return d
-
-
-def prepare_dir(path: str | os.PathLike, force: bool = False, kind: str = "report") -> Path:
-    """Create ``path`` or check that it may take the report (:func:`check_report_dir`); return it, emptied of a
-    previous report's plots (a diagnose report's ladder plot stayed beside a compare report written after it).
-    """
-    d = check_report_dir(path, force, kind)
-    if d.is_dir():
-        for name in _OURS - {MARKER}:
-            try:
-                (d / name).unlink()
-            except FileNotFoundError:
-                pass
-            except OSError as err:
-                raise HystError(f"cannot replace {d / name}: {err}") from err
-    else:
-        try:
-            d.mkdir(parents=True)
-        except OSError as err:
-            raise HystError(f"cannot create report directory {d}: {err}") from err
-    (d / MARKER).write_text(f"written by hyst {kind}; files listed in index.html are replaced on the next "
-                            f"{kind} report\n")
-    return d
 
 
 def _save(fig, path: Path) -> None:
@@ -376,27 +307,10 @@ def write_report(dir: str | os.PathLike, record, model_output: np.ndarray, stats
         _write_into(d, t, u, y, yhat, record, stats, ladder, diagnosis, title)
         (d / MARKER).write_text(f"written by hyst {kind}; files listed in index.html are replaced on the next "
                                 f"{kind} report\n")
-        _commit(d, target)
+        commit_report(d, target)
     finally:
         shutil.rmtree(d, ignore_errors=True)
     return target
-
-
-def _commit(stage: Path, target: Path) -> None:
-    """Move the finished report from ``stage`` into ``target``: by one rename where it is new, else file by file
-    (index.html last) after removing the previous report's plots that this one does not have."""
-    if not target.exists():
-        os.chmod(stage, 0o777 & ~user_umask())  # mkdtemp makes it 0700; a plain mkdir would not
-        os.rename(stage, target)
-        return
-    try:
-        for name in _OURS - {MARKER}:
-            if not (stage / name).exists():
-                (target / name).unlink(missing_ok=True)
-        for p in sorted(stage.iterdir(), key=lambda p: p.name == "index.html"):
-            os.replace(p, target / p.name)
-    except OSError as err:
-        raise HystError(f"cannot replace the report in {target}: {err}") from err
 
 
 def _write_into(d: Path, t, u, y, yhat, record, stats, ladder, diagnosis, title) -> None:
