@@ -124,6 +124,7 @@ class IdentConfig:
 
 def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
     """Fit ``cfg.model`` (+ effects) to one bag; returns ``(summary, model, result, dt)``. Pure: no ROS."""
+    from .effects.settle import settle_result
     from .identify import fit
     from .identify.admissible import check_admissible, constrain, constrained_summary
     from .identify.input_range import identified_range
@@ -149,12 +150,13 @@ def fit_bag(path: str, cfg: IdentConfig) -> tuple[dict, object, object, float]:
         import secrets
         seed = secrets.randbelow(2 ** 31)
     res = fit(model, rec.t, rec.u, rec.y, method=cfg.method, seed=None if seed < 0 else seed, split=split)
+    res = settle_result(model, res, rec.t, rec.u)  # no stop where the record shows none, as hyst fit
     constrained = None
     if cfg.admissible:  # as hyst fit --admissible: Remark 4.1 and passive rate terms, at a stated cost
         con = constrain(model, rec.t, rec.u, rec.y, res.theta, split)
         if con is not None:  # the free fit's violations for the summary, as hyst fit's JSON names them
             constrained = constrained_summary(res.rmse, check_admissible(model, res.theta).violations, con.rmse)
-            res = con
+            res = settle_result(model, con, rec.t, rec.u)
     # Remark 4.1, parameters on their bounds and a divergence probe on the record's input range, as hyst fit
     # reports them; the model is still written and pushed (the controller probes it against its own limits).
     adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))

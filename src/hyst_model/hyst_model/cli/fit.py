@@ -190,7 +190,9 @@ def run(args) -> int:
             print(f"hyst fit: {args.method} seed {args.seed} (--seed {args.seed} repeats this fit)", file=sys.stderr)
     res = fit(model, rec.t, rec.u, rec.y, method=args.method, seed=args.seed, split=split,
               progress=not args.quiet, **options)
+    from ..effects.settle import settle_result
     from ..identify.admissible import check_admissible
+    res = settle_result(model, res, rec.t, rec.u)  # no stop where the record shows none (effects.settle)
     adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
     constrained = None
     if args.admissible:
@@ -198,7 +200,7 @@ def run(args) -> int:
         require_remark(adm, args.model)
         con = constrain(model, rec.t, rec.u, rec.y, res.theta, split)
         if con is not None:
-            free, res = res, con
+            free, res = res, settle_result(model, con, rec.t, rec.u)
             constrained = constrained_summary(free.rmse, adm.violations, res.rmse)
             adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
             if not args.quiet:

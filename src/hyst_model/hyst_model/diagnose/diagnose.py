@@ -43,7 +43,10 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from hyst_common.blas import one_blas_thread
+
 from ..effects import effects_data_config
+from ..effects.settle import settle
 from ..effects.signals import noise_floor, sample_time, fmt_len
 from ..errors import DataError, FitError
 from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scales, _simulate, candidate_names,
@@ -107,6 +110,7 @@ class Diagnosis:
         }
 
 
+@one_blas_thread
 def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None, fitter=None,
              min_factor: float = 1.1, t_min: float = 3.0, noise_margin: float = 1.1,
              unexplained_factor: float = UNEXPLAINED_FACTOR,
@@ -229,6 +233,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     und = undetermined(s, full, cands, list(chosen))                 # 5. what the record cannot tell apart
     if und:
         expl = f"{expl}; {sentence(und, noise, dt, (float(np.min(u)), float(np.max(u))))}"
+    # what the user is handed: no stop where the record shows none (the same output on the record: .settle)
+    models = {k: (m, settle(m, th, t, u)) for k, (m, th) in models.items()}
     return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
                      time.perf_counter() - t0, models, unexplained, caution, und)
 

@@ -93,6 +93,27 @@ class Saturation(Effect):
         top, bottom, w = float(theta[0]), float(theta[1]), float(theta[2])
         return soft_limit(y, top, bottom, w, self.two_sided)
 
+    def settle(self, theta, x):
+        """A two-sided limit whose knee no sample of the inner output ``x`` enters is moved out to the bound (the
+        acting knee width kept): the same output on the record, bit for bit, and no stop where the record shows
+        none (:mod:`.settle`). The top alone has nothing to settle: without it the effect does nothing."""
+        top, bottom, w = (float(v) for v in theta)
+        if not self.two_sided or not np.all(np.isfinite(x)):
+            return theta
+        we = knee_width(top, bottom, w, True)
+        if not (top > bottom and self.params()[2].lower <= we):
+            return theta
+        lo, hi = float(np.min(x)), float(np.max(x))
+        # half the limits' range: 25 stroke scales out, beyond any travel, and not on the bound (which reports a
+        # fit stuck there)
+        b = 0.5 * self.bound
+        out = np.array(theta, dtype=np.float64)
+        if lo >= bottom + we:  # the lower branch is taken only below its knee
+            out[1], out[2] = -b, we
+        if hi <= top - we:  # the upper one likewise
+            out[0], out[2] = b, we
+        return out
+
     def online(self, theta, base=None):
         return SaturationInverse(float(theta[0]), float(theta[1]), float(theta[2]), self.two_sided)
 

@@ -6,6 +6,8 @@ convention (``fit`` returns self; ``theta_``, ``params_``, ``result_``). See :mo
 """
 from __future__ import annotations
 
+from hyst_common.blas import one_blas_thread
+
 import importlib
 from collections.abc import Callable
 from typing import TYPE_CHECKING
@@ -32,6 +34,7 @@ def __getattr__(name):
     raise AttributeError(name)
 
 
+@one_blas_thread
 def fit(model: Model, t, u, y, method: str = "fast", seed: int | None = None, split=0.25,
         progress: Callable[[str], None] | bool | None = None, **options) -> FitResult:
     """Identify ``model`` on the record ``t, u, y`` (s, V, m) and return the :class:`FitResult`.

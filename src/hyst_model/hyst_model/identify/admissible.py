@@ -9,6 +9,8 @@ data do not determine it): the fit is not to be trusted without a look. Both are
 """
 from __future__ import annotations
 
+from hyst_common.blas import one_blas_thread
+
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -240,6 +242,7 @@ def _active_rate(vals: dict) -> bool:
     return any(vals.get(p, 0.0) < 0 for p in ("psi1", "psi2"))
 
 
+@one_blas_thread
 def constrain(model, t, u, y, theta, split) -> FitResult | None:
     """``hyst fit --admissible``, ``hyst diagnose --admissible`` and the ident node's ``admissible``: None when θ
     (a free fit of ``model``) is already admissible, else the constrained refit (:func:`fit_admissible`) as a
