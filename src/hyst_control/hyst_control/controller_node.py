@@ -313,7 +313,13 @@ class ControllerNode(AtomicParametersNode):
             self.get_logger().warning(f"reference ignored, taken for a corrupt sample: {why}",
                                       throttle_duration_sec=1.0)
             return
-        v = msg.velocity[0] if msg.velocity and math.isfinite(msg.velocity[0]) else 0.0
+        v = float(msg.velocity[0]) if msg.velocity else 0.0
+        why = self._settings.plausible_velocity(v)
+        if why:  # the position is good: keep it, without the velocity (no extrapolation), and count it
+            self._n["bad_refs"] += 1
+            self.get_logger().warning(f"reference velocity ignored, taken for a corrupt sample: {why}",
+                                      throttle_duration_sec=1.0)
+            v = 0.0
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         self._ref = (t, _F(msg.position[0]), _F(v))
 

@@ -412,3 +412,16 @@ def test_a_reference_far_beyond_the_travel_is_refused_as_a_parameter_and_ignored
     ref_pub.publish(m)
     assert _spin_until(ex, lambda: node.counts["bad_refs"] == 1)
     assert node._ref is None  # not followed
+    # a sane position with a corrupt velocity (µm/s sent as m/s, or 1e300): the position is followed, the velocity
+    # is not extrapolated (it drove every command to 150 V) and the sample is counted
+    for k, v in enumerate((62.8, 1e300, -float("inf"))):
+        m = JointState()
+        m.position, m.velocity = [15e-6], [v]
+        ref_pub.publish(m)
+        assert _spin_until(ex, lambda k=k: node.counts["bad_refs"] == 2 + k)
+        assert node._ref is not None and node._ref[1] == 15e-6 and node._ref[2] == 0.0
+    m = JointState()
+    m.position, m.velocity = [15e-6], [1e-3]  # 1 mm/s: a stage can follow that
+    ref_pub.publish(m)
+    assert _spin_until(ex, lambda: node._ref is not None and node._ref[2] == 1e-3)
+    assert node.counts["bad_refs"] == 4

@@ -11,6 +11,7 @@ published from it as they arrive, a lost port is reopened with backoff. Voltages
 """
 from __future__ import annotations
 
+import math
 import sys
 import threading
 from collections import deque
@@ -218,8 +219,13 @@ class DriverNode(AtomicParametersNode):
     def _on_command(self, msg: JointState) -> None:
         if not msg.effort:
             self.bad_commands += 1  # a malformed message is counted, never fatal; the watchdog still runs
+            self.get_logger().warning("command without effort[0] ignored", throttle_duration_sec=1.0)
             return
-        self.link.command(float(msg.effort[0]))
+        v = float(msg.effort[0])
+        if not math.isfinite(v):  # the limiter refuses it too; say so here, where the user looks
+            self.get_logger().warning(f"command {v} V refused: the output holds the last good one",
+                                      throttle_duration_sec=1.0)
+        self.link.command(v)
         st = msg.header.stamp
         if st.sec or st.nanosec:  # answers a state sample: sample time -> command arrival is the loop latency
             self._latency.append(self.get_clock().now().nanoseconds - (st.sec * 1_000_000_000 + st.nanosec))
@@ -293,11 +299,15 @@ class DriverNode(AtomicParametersNode):
             level, message = DiagnosticStatus.ERROR, f"device fault {h.last_device_error}"
         elif bad != bad_prev or grew("device_errors") or grew("timeouts") or grew("disconnects"):
             level, message = DiagnosticStatus.WARN, "link degraded (bad frames, device errors or timeouts)"
+        elif grew("rejected") or self.bad_commands != getattr(self, "_prev_bad_commands", 0):
+            level, message = DiagnosticStatus.WARN, ("commands refused (non-finite, far outside the range or "
+                                                     "without a voltage): the output holds the last good one")
         elif h.watchdog_active:
             level, message = DiagnosticStatus.WARN, "no commands: holding/ramping to v_safe"
         else:
             level, message = DiagnosticStatus.OK, "running"
         self._prev_io_errors = self.io_errors
+        self._prev_bad_commands = self.bad_commands
         kv = {"state": h.state, "port": self.cfg.port, "protocol": self.cfg.protocol, "identity": h.identity,
               "connects": h.connects, "disconnects": h.disconnects, "handshake_failures": h.handshake_failures,
               "samples": h.samples, "lost_samples": h.lost_samples, "timeouts": h.timeouts,

@@ -36,6 +36,11 @@ from .emulated_device import FAULTS, EmulatedDevice, FaultRates
 
 __all__ = ["EmulatedDevice", "PtyEmulator", "FaultRates", "FAULTS", "main"]
 
+def _is_pty_link(path: str) -> bool:
+    """A symlink to a pseudo-terminal (what an emulator's port link is), not a user's file."""
+    return os.path.islink(path) and os.readlink(path).startswith(("/dev/pts/", "/dev/tty"))
+
+
 class PtyEmulator:
     """Serve an :class:`EmulatedDevice` on a pty pair from a background thread, injecting faults on request.
 
@@ -55,6 +60,9 @@ class PtyEmulator:
         self.device = device
         self._tmpdir: str | None = None
         if link:
+            if os.path.lexists(link) and not _is_pty_link(link):
+                # a stale link of an emulator that died is replaced; anything else is the user's
+                raise FileExistsError(f"{link} exists and is not an emulator's port link; give another path")
             self.link = link
         else:
             self._tmpdir = tempfile.mkdtemp(prefix="hyst_emulator_")
@@ -86,14 +94,14 @@ class PtyEmulator:
         tty.setraw(self._slave)  # no echo, no CR/LF translation, before anyone opens it
         os.set_blocking(self._master, False)
         self.pty_name = os.ttyname(self._slave)
-        tmp = self.link + ".new"
-        if os.path.lexists(tmp):
+        tmp = f"{self.link}.{os.getpid()}.new"  # ours alone: a user's LINK.new stays untouched
+        if os.path.lexists(tmp) and _is_pty_link(tmp):
             os.unlink(tmp)
         os.symlink(self.pty_name, tmp)
         os.replace(tmp, self.link)  # atomic: the path never points at a dead pty
 
     def _unplug(self) -> None:
-        if os.path.lexists(self.link):
+        if os.path.islink(self.link) and os.readlink(self.link) == self.pty_name:  # only the link we made
             os.unlink(self.link)
         for fd in (self._master, self._slave):
             if fd >= 0:
@@ -289,7 +297,11 @@ def main(argv: list[str] | None = None, *, build=None) -> int:
     if args.rt_priority and sched.policy != "fifo":
         print(f"hyst_emulator: {sched.note}; timing follows the host's load", file=sys.stderr)
     signal.signal(signal.SIGTERM, _raise_interrupt)  # `kill` cleans up the port link like Ctrl-C
-    emu = PtyEmulator(dev, args.link, rates, seed=args.seed)
+    try:
+        emu = PtyEmulator(dev, args.link, rates, seed=args.seed)
+    except FileExistsError as err:
+        print(f"hyst_emulator: --link {err}", file=sys.stderr)
+        return 2
     try:
         emu.start()
     except OSError as err:

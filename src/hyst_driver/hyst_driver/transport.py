@@ -127,8 +127,8 @@ class DeviceLink:
                 self.health.late_commands += 1
                 return
             if self.health.state == "running" and self._pending_limits is None:
-                self.watchdog.feed(now)
-                self.limiter.request(volts)
+                if self.limiter.request(volts):  # a rejected command (NaN, 1e300) is not a sign of life
+                    self.watchdog.feed(now)
                 try:
                     self._write_voltage(now)
                 except LinkError as err:
@@ -327,9 +327,8 @@ class DeviceLink:
     def _run(self, now: float) -> None:
         h = self.health
         cmd, self._pending_cmd = self._pending_cmd, None
-        if cmd is not None:
+        if cmd is not None and self.limiter.request(cmd[0]):
             self.watchdog.feed(cmd[1])
-            self.limiter.request(cmd[0])
         if self.watchdog.expired(now):
             self.limiter.request_safe()
             h.watchdog_active = True

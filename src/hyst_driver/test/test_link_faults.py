@@ -149,6 +149,31 @@ def test_watchdog_ramps_to_safe_when_commands_stop(make_rig, test_limits, check_
     check_applied(rig.device, test_limits)
 
 
+def test_a_stream_of_refused_commands_is_no_sign_of_life_for_the_watchdog(make_rig, test_limits, check_received,
+                                                                           check_applied):
+    """NaN and 1e300 commands kept the watchdog fed: the output held 75 V for seconds of garbage instead of
+    ramping to v_safe, while /diagnostics said 'running'."""
+    rig = make_rig("ascii", seed=4)
+    assert rig.run_until(lambda: rig.link.health.state == "running", DEADLINE)
+
+    def command_110() -> bool:
+        rig.link.command(110.0)
+        return rig.device.plant.u_applied == 110.0
+
+    assert rig.run_until(command_110, DEADLINE, command=False)
+    r0 = rig.link.health.rejected
+
+    def garbage() -> bool:  # commands keep arriving, none of them usable
+        rig.link.command(float("nan"))
+        rig.link.command(1e300)
+        return (rig.link.health.watchdog_active and rig.device.plant.u_applied == test_limits.v_safe)
+
+    assert rig.run_until(garbage, DEADLINE, command=False)
+    assert rig.link.snapshot().rejected > r0
+    check_received(rig.device.received, test_limits)
+    check_applied(rig.device, test_limits)
+
+
 def test_shutdown_ramp_and_replug_reseed(make_rig, test_limits, check_received, check_applied):
     rig = make_rig("gcs", seed=5, command_timeout=10.0)
     assert rig.run_until(lambda: rig.link.health.state == "running", DEADLINE, command=False)

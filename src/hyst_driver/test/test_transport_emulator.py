@@ -186,3 +186,22 @@ def test_device_clock_is_settled_only_after_a_full_window_since_reset():
     assert c.settled and abs(c.map(1.001, 11.0012) - (10.0 + 1.001 + 1e-4)) < 1e-9
     c.reset()
     assert not c.settled
+
+
+def test_a_link_path_that_is_a_users_file_is_refused_and_nothing_is_deleted(tmp_path):
+    """--link PATH replaced a user's file with its symlink, deleted PATH.new, and removed the link on exit."""
+    mine = tmp_path / "notes.txt"
+    mine.write_text("precious")
+    (tmp_path / "notes.txt.new").write_text("also mine")
+    with pytest.raises(FileExistsError, match="not an emulator's port link"):
+        PtyEmulator(linear_device("pea", 1000.0), link=str(mine))
+    link = tmp_path / "tty"
+    (tmp_path / "tty.new").write_text("mine too")
+    with PtyEmulator(linear_device("pea", 1000.0), link=str(link)) as emu:
+        assert os.readlink(link) == emu.pty_name
+    assert not os.path.lexists(link)  # the link it made is gone, the user's files are not
+    assert mine.read_text() == "precious" and (tmp_path / "notes.txt.new").read_text() == "also mine"
+    assert (tmp_path / "tty.new").read_text() == "mine too"
+    os.symlink("/dev/pts/999", link)  # a stale link of an emulator that died is replaced
+    with PtyEmulator(linear_device("pea", 1000.0), link=str(link)) as emu:
+        assert os.readlink(link) == emu.pty_name

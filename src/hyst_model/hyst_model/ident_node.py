@@ -80,6 +80,18 @@ class IdentConfig:
     admissible: bool = False
     effect_config: tuple[str, ...] = ()
 
+    def _check_params_file(self) -> None:
+        """Refused now, not after a fit: a directory, or one of the bags (or a file in one) even with ``overwrite``
+        (a 1.2 MB recording became a 1 kB params file). An existing file is judged when a fit writes it: the node
+        replaces what it wrote itself."""
+        target = os.path.realpath(self.params_file)
+        if os.path.isdir(target):
+            raise ValueError(f"params_file {self.params_file!r} is a directory; give a file path")
+        for bag in self.bags + ((self.watch_dir,) if self.watch_dir else ()):
+            b = os.path.realpath(bag)
+            if target == b or target.startswith(b + os.sep) and bag != self.watch_dir:
+                raise ValueError(f"params_file {self.params_file!r} would replace the recording {bag!r}")
+
     def validate(self) -> "IdentConfig":
         from .models import BASE_MODELS
         if self.model not in BASE_MODELS:
@@ -96,6 +108,8 @@ class IdentConfig:
             raise ValueError(f"watch_dir {self.watch_dir!r} is not a directory")
         if self.params_file and not Path(self.params_file).parent.is_dir():
             raise ValueError(f"directory of params_file {self.params_file!r} does not exist")
+        if self.params_file:
+            self._check_params_file()
         if not self.topic.startswith("/"):
             raise ValueError("topic must be absolute (start with /)")
         if self.controller_node and not self.controller_node.startswith("/"):
@@ -395,7 +409,8 @@ class IdentNode(AtomicParametersNode):
                 self._written_by_me.add(target)
                 summary["params_file"] = target
             except HystError as err:
-                self.get_logger().error(f"not written: {err} (set overwrite:=true to replace it)")
+                why = str(err).replace("; use --force to overwrite it", "")  # a CLI option, not this node's
+                self.get_logger().error(f"not written: {why} (set overwrite:=true to replace it)")
                 summary["params_file_error"] = str(err)
         if cfg.controller_node:
             self._push(model, res.theta, dt, summary)

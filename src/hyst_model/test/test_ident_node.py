@@ -263,6 +263,21 @@ def test_a_controller_node_name_ros_cannot_use_is_refused_when_set(name):
     assert IdentConfig(controller_node="/ns/hyst_controller").validate().controller_node == "/ns/hyst_controller"
 
 
+def test_a_params_file_that_would_replace_a_recording_is_refused_even_with_overwrite(tmp_path):
+    """params_file:=B/none.mcap with overwrite:=true turned a 1.2 MB recording into a 1 kB params file."""
+    t = np.arange(400) * 5e-4
+    u = 75 + 50 * np.sin(2 * np.pi * 2 * t)
+    bag = write_state_bag(tmp_path / "run", t, u, pea_default().simulate(u))
+    mcap = next(bag.glob("*.mcap"))
+    for target in (mcap, bag / "metadata.yaml", bag):
+        with pytest.raises(ValueError, match="would replace the recording|is a directory"):
+            IdentConfig(bags=(str(bag),), params_file=str(target), overwrite=True).validate()
+    with pytest.raises(ValueError, match="would replace the recording"):
+        IdentConfig(bags=(str(mcap),), params_file=str(mcap), overwrite=True).validate()
+    ok = IdentConfig(bags=(str(bag),), params_file=str(tmp_path / "p.yaml"), overwrite=True).validate()
+    assert ok.params_file == str(tmp_path / "p.yaml")
+
+
 def test_a_push_still_waiting_is_reported_when_a_newer_model_supersedes_it(tmp_path, ctx):
     """The second fit replaced the first one's pending push without a word (its push stayed 'pending')."""
     bags = [str(_bag(tmp_path / f"run{k}", seed=k)) for k in (1, 2)]
