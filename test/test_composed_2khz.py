@@ -79,9 +79,13 @@ def test_composed_realtime_samples_the_reference_in_process():
     assert tr["rmse"] < 2.5e-6
 
 
-def test_a_bad_reference_rate_is_refused():
-    proc = subprocess.run([str(EXE), "--reference-rate", "0"], capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 2 and "--reference-rate" in proc.stderr
+@pytest.mark.parametrize("argv,opt", [(["--reference-rate", "0"], "--reference-rate"),
+                                      (["--seconds", "-1"], "--seconds"),   # ran 0 s and exited 0
+                                      (["--seconds", "nan"], "--seconds"),  # ran until a signal
+                                      (["--wait-subscribers", "-3"], "--wait-subscribers")])
+def test_a_bad_option_is_refused(argv, opt):
+    proc = subprocess.run([str(EXE), *argv], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and opt in proc.stderr and "Traceback" not in proc.stderr
 
 
 @pytest.mark.parametrize("bad,why", [("params_file:=/nonexistent.yaml", "no such params file"),

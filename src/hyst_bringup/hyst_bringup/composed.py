@@ -84,6 +84,13 @@ def main(args=None) -> int:
     if not 1.0 <= opts.reference_rate <= 5000.0:
         print("hyst_loop_node: --reference-rate must be within [1, 5000] Hz", file=sys.stderr)
         return 2
+    if opts.seconds is not None and not 0.0 < opts.seconds <= 86400.0:  # -1 ran 0 s, nan until a signal
+        print("hyst_loop_node: --seconds must be within (0, 86400] s (leave it out to run until Ctrl-C)",
+              file=sys.stderr)
+        return 2
+    if opts.wait_subscribers < 0:
+        print("hyst_loop_node: --wait-subscribers must be 0 or more", file=sys.stderr)
+        return 2
 
     # signals as every hyst node takes them (hyst_common.node.run_node): a flag the loop reads, not rclpy's
     # KeyboardInterrupt inside a callback (a '[FATAL] Exception in callback' on one Ctrl-C in 2 of 7 stops)

@@ -135,6 +135,10 @@ class AtomicParametersNode(Node):
         over = self._parameter_overrides.get(name)
         if isinstance(value, float) and over is not None and over.type_ == Parameter.Type.INTEGER:
             self._parameter_overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(over.value))
+        if (isinstance(value, list) and value and all(isinstance(v, float) for v in value) and over is not None
+                and over.type_ == Parameter.Type.INTEGER_ARRAY):  # ``amplitudes:=[1]``, as for a single number
+            self._parameter_overrides[name] = Parameter(name, Parameter.Type.DOUBLE_ARRAY,
+                                                        [float(v) for v in over.value])
         if isinstance(value, list) and over is not None and over.type_ == Parameter.Type.NOT_SET:
             # ``name: []`` in a params file: ROS cannot type an empty list and left the parameter unset, which
             # broke every "get all parameters" (a dump); the declared default stands (hyst's lists default to
@@ -147,6 +151,9 @@ class AtomicParametersNode(Node):
         if p.type_ == Parameter.Type.INTEGER and self.has_parameter(p.name) \
                 and self.get_parameter(p.name).type_ == Parameter.Type.DOUBLE:
             return Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+        if p.type_ == Parameter.Type.INTEGER_ARRAY and self.has_parameter(p.name) \
+                and self.get_parameter(p.name).type_ == Parameter.Type.DOUBLE_ARRAY:
+            return Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in p.value])
         return p
 
     def set_parameters_atomically(self, parameter_list: Sequence[Parameter]) -> SetParametersResult:

@@ -238,6 +238,26 @@ def test_an_exit_code_on_exit_returns_is_the_processes(code, expect):
     assert r.returncode == expect, r.stderr
 
 
+class Amplitudes(AtomicParametersNode):
+    def __init__(self, **kwargs) -> None:
+        super().__init__("amplitudes", **kwargs)
+        self.declare_parameter("amplitudes", [0.25, 0.5])
+
+
+def test_whole_numbers_for_a_float_list_are_those_numbers(ctx):
+    """``-p amplitudes:=[1]`` is an INTEGER_ARRAY to ROS and was refused at start, though a single whole number
+    for a float parameter is taken."""
+    node = Amplitudes(context=ctx, cli_args=["--ros-args", "-p", "amplitudes:=[1]"])
+    try:
+        p = node.get_parameter("amplitudes")
+        assert list(p.value) == [1.0] and p.type_ == Parameter.Type.DOUBLE_ARRAY
+        assert node.set_parameters([Parameter("amplitudes", value=[1, 2])])[0].successful
+        assert list(node.get_parameter("amplitudes").value) == [1.0, 2.0]
+        assert not node.set_parameters([Parameter("amplitudes", value=["a"])])[0].successful
+    finally:
+        node.destroy_node()
+
+
 def test_diagnostics_carry_every_value_as_text_stamped_by_the_node(ctx):
     from diagnostic_msgs.msg import DiagnosticStatus
 

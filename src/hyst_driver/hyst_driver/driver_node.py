@@ -278,6 +278,9 @@ class DriverNode(AtomicParametersNode):
                                       "reconnecting, the output held at the device")
         if h.connects > seen[1] and seen[1] > 0:
             self.get_logger().info(f"link to the device regained ({h.identity or 'device'})")
+        if h.connects == 0 and h.state != "running" and h.last_link_error:  # never connected: say why, not only
+            self.get_logger().warning(f"no link to the device yet on {self.cfg.port}: {h.last_link_error}; "
+                                      "retrying", throttle_duration_sec=5.0)  # on /diagnostics
         self._seen_link = (h.disconnects, h.connects)
 
     def diagnostics(self, h: LinkHealth) -> DiagnosticArray:

@@ -89,6 +89,7 @@ class ResidualNode(AtomicParametersNode):
     def __init__(self, **kwargs):
         super().__init__("hyst_residual", **kwargs)
         self._model_keys: set[str] = set()
+        self._numeric_keys: set[str] = set()  # model keys declared with a number: a bool or word is refused
         if not {"model.u_scale", "model.y_scale"} & set(self._parameter_overrides):
             # the default model's units are 1 V and 1 m per unit: it predicted 120 m at 75 V
             raise HystError("no model given: start with the params file whose model to run (--ros-args "
@@ -143,6 +144,8 @@ class ResidualNode(AtomicParametersNode):
             return
         self._model_keys.add(name)
         value = float(default) if isinstance(default, (int, float)) else str(default)
+        if isinstance(value, float):
+            self._numeric_keys.add(name)
         # dynamic typing: a hand-written params file may say 20 where the model says 20.0
         self.declare_parameter(name, value, ParameterDescriptor(description=doc, dynamic_typing=True))
 
@@ -178,13 +181,20 @@ class ResidualNode(AtomicParametersNode):
         if missing:
             raise HystError(f"model {model.name} needs parameters {', '.join(missing)} that were not declared at "
                             "start-up; restart the node with the new params file")
-        words = [n for n in model.names
-                 if n in cfg and (isinstance(cfg[n], bool) or not isinstance(cfg[n], (int, float)))]
+        numeric = set(model.names) | {k[len("model."):] for k in self._numeric_keys}
+        words = [n for n in sorted(numeric)
+                 if n in cfg and cfg[n] is not None
+                 and (isinstance(cfg[n], bool) or not isinstance(cfg[n], (int, float)))]
         if words:  # the model keys are dynamically typed (20 for 20.0): a bool or a word was taken as a number
             raise HystError(f"model.{words[0]} must be a number, not {cfg[words[0]]!r}")
         theta = model.pack({n: float(cfg[n]) for n in model.names})
         if not np.all(np.isfinite(theta)):
             raise HystError("model parameters must be finite")
+        for key, ok, what in (("u_scale", lambda v: v > 0, "positive"), ("y_scale", lambda v: v > 0, "positive"),
+                              ("dt", lambda v: v >= 0, "0 (not given) or positive")):
+            v = cfg.get(key)
+            if v is not None and not (math.isfinite(float(v)) and ok(float(v))):  # true was taken as 1
+                raise HystError(f"model.{key} must be {what} and finite, not {v!r}")
         # A full-range test input (±10 model units, the fitting convention of hyst_model.models.data_config).
         t = np.arange(1000) * 1e-3
         amp = 10.0 * float(cfg.get("u_scale", 1.0) or 1.0)

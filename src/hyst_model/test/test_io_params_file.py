@@ -93,8 +93,14 @@ def test_garbage_missing_scales_and_bad_dt_are_one_clear_error(tmp_path):
     from hyst_model.io import read_params
     bad = tmp_path / "garbage.bin"
     bad.write_bytes(bytes(range(256)) * 4)
-    with pytest.raises(ParamsError, match="cannot read params file"):
+    with pytest.raises(ParamsError, match="cannot read params file") as e:
         read_params(bad)
+    assert "\n" not in str(e.value)
+    broken = tmp_path / "broken.yaml"  # a YAML error was six lines, cut mid-word
+    broken.write_text("/**:\n  ros__parameters:\n    model: [1, 2\n   zeta1: 0.3\n")
+    with pytest.raises(ParamsError, match=r"cannot read params file \(ParserError: .* at line 4, column 9\)$") as e:
+        read_params(broken)
+    assert "\n" not in str(e.value)
     from hyst_model.core import pea_default
     vals = "".join(f"      {k}: {v!r}\n" for k, v in pea_default().to_dict().items()
                    if k not in ("u_scale", "y_scale", "offset"))

@@ -140,6 +140,11 @@ def test_parameters_validated_and_applied(tmp_path, rigs):
     assert not n.set_parameters([Parameter("reset_gap", value=-1.0)])[0].successful
     r = n.set_parameters([Parameter("model.zeta1", value=True)])[0]  # dynamically typed: a bool was taken
     assert not r.successful and "model.zeta1 must be a number" in r.reason
+    # the configuration keys too: u_scale:=true became 1 and every state was then ignored as out of range
+    for name, value, why in (("model.u_scale", True, "must be a number"), ("model.dt", "abc", "must be a number"),
+                             ("model.dt", -1.0, "model.dt must be 0"), ("model.y_scale", 0.0, "must be positive")):
+        r = n.set_parameters([Parameter(name, value=value)])[0]
+        assert not r.successful and why in r.reason, (name, value, r.reason)
     # a diverging parameter set is refused with a reason
     r = n.set_parameters_atomically([Parameter("model.psi1", value=-0.5), Parameter("model.alpha1", value=-0.5)])
     assert not r.successful and "diverges" in r.reason

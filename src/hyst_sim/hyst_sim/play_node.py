@@ -12,6 +12,7 @@ late messages at once rather than dropping them. ``--loop`` repeats until SIGINT
 from __future__ import annotations
 
 import argparse
+import math
 import threading
 import time
 from pathlib import Path
@@ -104,6 +105,10 @@ class PlayNode(Node):
             self.done.set()
 
 
+#: Longest --delay or --wait-for-subscribers (s): a day.
+MAX_WAIT = 86400.0
+
+
 def _parse(argv: list[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="hyst_bag_play", description=__doc__.split("\n\n")[0])
     ap.add_argument("bag", type=Path, help="rosbag2 directory (MCAP or sqlite3)")
@@ -114,10 +119,11 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     ap.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="S",
                     help="wait up to S seconds for a subscriber on every topic before starting")
     a = ap.parse_args(argv)
-    if not a.rate > 0:
-        ap.error("--rate must be positive")
-    if a.delay < 0 or a.wait_for_subscribers < 0:
-        ap.error("--delay and --wait-for-subscribers must not be negative")
+    if not (a.rate > 0 and math.isfinite(a.rate)):
+        ap.error("--rate must be a positive number")
+    for opt, v in (("--delay", a.delay), ("--wait-for-subscribers", a.wait_for_subscribers)):
+        if not 0 <= v <= MAX_WAIT:  # inf killed the player thread (time_t overflow) and published nothing
+            ap.error(f"{opt} must be between 0 and {MAX_WAIT:g} s")
     return a
 
 

@@ -174,12 +174,17 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     from rclpy.exceptions import InvalidTopicNameException
     from rclpy.validate_topic_name import validate_topic_name
     for item in a.topics:  # 'bad-topic' gave a traceback with a type and recorded nothing without one
-        name = item.partition(":")[0]
+        name, _, msgtype = item.partition(":")
         try:
             validate_topic_name(name)
         except InvalidTopicNameException:
             ap.error(f"{name!r} is not a valid ROS topic name (letters, digits, underscores and '/', each part not "
                      "starting with a digit)")
+        if msgtype:  # a mistyped type recorded nothing and exited 0 with an empty bag
+            try:
+                message_class(msgtype)
+            except BagError as err:
+                ap.error(f"{name}: {err} (give TOPIC:pkg/msg/Type, e.g. /stage/state:sensor_msgs/msg/JointState)")
     return a
 
 
@@ -191,7 +196,11 @@ def main(args=None) -> int:
     def make(a: argparse.Namespace) -> RecordNode:
         out = a.output or default_bag_path()
         if a.output is None:
-            out.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                out.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as err:  # ./bags is a file: a traceback before
+                raise SimError(f"cannot create the bag folder {out.parent}: {err.strerror or err}; give -o PATH") \
+                    from err
         writer = RawBagWriter(out, compress=not a.no_compress)  # refuses an existing directory
         try:
             node = RecordNode(writer, a.topics, a.duration)

@@ -255,3 +255,25 @@ def test_recorder_refuses_a_topic_name_ros_cannot_use_before_it_starts(tmp_path,
                           text=True, timeout=120)
     assert proc.returncode == 2 and "not a valid ROS topic name" in proc.stderr and "Traceback" not in proc.stderr
     assert not (tmp_path / "bag").exists()
+
+
+def test_recorder_refuses_a_message_type_it_cannot_record_and_a_bag_folder_that_is_a_file(tmp_path):
+    """A mistyped type recorded nothing into an empty bag and exited 0; ./bags being a file was a traceback."""
+    exe = Path(sys.executable).with_name("hyst_bag_record")
+    proc = subprocess.run([str(exe), "/stage/state:sensor_msgs/msg/JointStates", "-o", str(tmp_path / "bag"),
+                           "--duration", "1"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "JointStates" in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "bag").exists()
+    (tmp_path / "bags").write_text("mine")
+    proc = subprocess.run([str(exe), "--duration", "0.2"], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert proc.returncode == 2 and "cannot create the bag folder" in proc.stderr and "Traceback" not in proc.stderr
+    assert (tmp_path / "bags").read_text() == "mine"
+
+
+@pytest.mark.parametrize("argv", [["--delay", "inf"], ["--delay", "1e10"], ["--wait-for-subscribers", "nan"],
+                                  ["--rate", "inf"]])
+def test_player_refuses_waits_it_cannot_keep(tmp_path, argv):
+    """--delay inf killed the player thread (time_t overflow) and it published nothing, exit 0."""
+    exe = Path(sys.executable).with_name("hyst_bag_play")
+    proc = subprocess.run([str(exe), str(tmp_path / "nobag"), *argv], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and argv[0] in proc.stderr and "Traceback" not in proc.stderr

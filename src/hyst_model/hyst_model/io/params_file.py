@@ -198,6 +198,17 @@ def _check_effect_keys(path: Path, effects: list, flat: Mapping) -> None:
                               f"({', '.join(sorted(known))})")
 
 
+def _one_line(err: BaseException) -> str:
+    """A reader's error in one line: YAML's problem and where (``line 3, column 12``), not its six-line excerpt
+    cut at 200 characters."""
+    mark = getattr(err, "problem_mark", None)
+    problem = getattr(err, "problem", None)
+    if problem and mark is not None:
+        return f"{type(err).__name__}: {problem} at line {mark.line + 1}, column {mark.column + 1}"
+    text = " ".join(str(err).split())
+    return f"{type(err).__name__}: {text[:160]}{'...' if len(text) > 160 else ''}"
+
+
 def read_params(path: str | Path) -> ParamsSpec:
     """Read a params file written by :func:`write_params` (or by hand in the same layout).
 
@@ -216,7 +227,7 @@ def read_params(path: str | Path) -> ParamsSpec:
     except FileNotFoundError:
         raise ParamsError(f"{path}: no such params file") from None
     except (OSError, yaml.YAMLError, UnicodeDecodeError, RecursionError) as err:  # binary, garbage, unreadable
-        raise ParamsError(f"{path}: cannot read params file ({type(err).__name__}: {str(err)[:200]})") from err
+        raise ParamsError(f"{path}: cannot read params file ({_one_line(err)})") from err
     if not isinstance(doc, Mapping):
         raise ParamsError(f"{path}: not a ROS 2 parameters file (expected '/**: ros__parameters: model: ...')")
     section = None
