@@ -72,6 +72,10 @@ class ResidualSettings:
     #: A voltage beyond ±this (V) is taken for a corrupt sample and not run: twice the model's full range (its
     #: fitting convention is ±10 units of ``u_scale``); one 1e4 V sample sent the prediction to −1 cm for 200 samples.
     u_max: float = math.inf
+    #: A reading outside this range (m) is taken for a corrupt sample: it is not compared (no residual is published
+    #: for it) and counted. The model's output over the full-range test sine widened by its span at each end (as
+    #: the controller judges states); a 1e300 m reading was published as a 1e300 m residual.
+    y_range: tuple[float, float] = (-math.inf, math.inf)
 
     @property
     def streaming(self) -> bool:
@@ -97,7 +101,7 @@ class ResidualNode(AtomicParametersNode):
         self._declare()
         self._settings = self._read()
         self._reset()
-        self._n = dict.fromkeys(("states", "bad_states", "published", "resets"), 0)
+        self._n = dict.fromkeys(("states", "bad_states", "bad_readings", "published", "resets"), 0)
         self._n_seen = dict(self._n)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
@@ -202,9 +206,11 @@ class ResidualNode(AtomicParametersNode):
             probe = np.asarray(model.simulate(theta, t, amp * np.sin(2 * np.pi * 2.0 * t)))
         if not np.all(np.isfinite(probe)) or np.max(np.abs(probe)) > 1e3:
             raise HystError("the model diverges on a full-range test sine with these parameters")
+        lo, hi = float(np.min(probe)), float(np.max(probe))
         s = ResidualSettings(model, theta, float(self._get("reset_gap", changes)),
                              float(self._get("history", changes)), int(self._get("batch", changes)),
-                             u_max=2.0 * amp)
+                             u_max=2.0 * amp, y_range=(lo - (hi - lo), hi + (hi - lo)) if hi > lo else
+                             (-math.inf, math.inf))
         return s
 
     def _on_set(self, params) -> SetParametersResult:
@@ -263,6 +269,11 @@ class ResidualNode(AtomicParametersNode):
         self._t_last = t
         u = float(msg.effort[0])
         y = float(msg.position[0]) if msg.position and math.isfinite(msg.position[0]) else math.nan
+        if not (s.y_range[0] <= y <= s.y_range[1]) and math.isfinite(y):
+            self._n["bad_readings"] += 1  # the model still runs on the (good) input; this reading is not compared
+            self.get_logger().warning(f"reading {y:.6g} m not compared: far outside the model's output range "
+                                      f"({s.y_range[0]:.3g}..{s.y_range[1]:.3g} m)", throttle_duration_sec=1.0)
+            y = math.nan
         if s.streaming:
             self._publish(msg.header.stamp, self._predict_stream(u), y)
             return
@@ -314,12 +325,15 @@ class ResidualNode(AtomicParametersNode):
         return dict(self._n)
 
     def _publish_diagnostics(self) -> None:
-        """Counts on ``/diagnostics`` every second; WARN while states are being ignored."""
+        """Counts on ``/diagnostics`` every second; WARN while states or readings are being ignored."""
         new_bad = self._n["bad_states"] - self._n_seen["bad_states"]
+        new_read = self._n["bad_readings"] - self._n_seen["bad_readings"]
         self._n_seen = dict(self._n)
-        message = (f"{new_bad} state(s) ignored in the last second (non-finite or implausible effort)" if new_bad
-                   else f"model {self._settings.model.name}")
-        st = diagnostic_status("hyst_residual", "stage", DiagnosticStatus.WARN if new_bad else DiagnosticStatus.OK,
+        said = ([f"{new_bad} state(s) ignored in the last second (non-finite or implausible effort)"] if new_bad
+                else []) + ([f"{new_read} reading(s) not compared (far outside the model's output range)"]
+                            if new_read else [])
+        message = "; ".join(said) or f"model {self._settings.model.name}"
+        st = diagnostic_status("hyst_residual", "stage", DiagnosticStatus.WARN if said else DiagnosticStatus.OK,
                                message, self._n)
         self._diag_pub.publish(diagnostic_array(self, [st]))
 

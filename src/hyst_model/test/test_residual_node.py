@@ -184,6 +184,12 @@ def test_bad_states_are_ignored_and_gaps_restart(tmp_path, rigs):
     assert rig.spin_until(lambda: len(rig.pred) >= 81)
     rig.spin_until(lambda: False, timeout=0.1)
     assert len(rig.res) == 80
+    # a corrupt reading (1e300 m) was published as a 1e300 m residual at level OK: predicted, not compared
+    rig.send(t[-1] + 1.002, 80.0, 1e300)
+    assert rig.spin_until(lambda: len(rig.pred) >= 82 and rig.node.counts["bad_readings"] == 1)
+    assert rig.spin_until(lambda: any(s.level == DiagnosticStatus.WARN and "1 reading(s) not compared" in s.message
+                                      for d in diags for s in d.status), timeout=30.0)
+    assert len(rig.res) == 80
 
 
 def test_without_a_params_file_the_node_refuses_to_start():
