@@ -132,16 +132,22 @@ def test_unplug_and_replug_100_runs(make_rig, check_received, check_applied, tes
     check_applied(rig.device, test_limits)
 
 
-def test_watchdog_ramps_to_safe_when_commands_stop(make_rig, test_limits, check_received, check_applied):
-    rig = make_rig("ascii", seed=3)
+def _running_at_110(make_rig, seed: int):
+    """A rig whose amplifier applies 110 V. Commands keep coming until it does (a single command would let the
+    0.05 s watchdog fire before a loaded host finished the ramp up: a test of the scheduler, not of the watchdog)."""
+    rig = make_rig("ascii", seed=seed)
     assert rig.run_until(lambda: rig.link.health.state == "running", DEADLINE)
-    # Commands keep coming until the amplifier applies 110 V (a single command would let the 0.05 s watchdog
-    # fire before a loaded host finished the ramp up: a test of the scheduler, not of the watchdog).
+
     def command_110() -> bool:
         rig.link.command(110.0)
         return rig.device.plant.u_applied == 110.0
 
     assert rig.run_until(command_110, DEADLINE, command=False)
+    return rig
+
+
+def test_watchdog_ramps_to_safe_when_commands_stop(make_rig, test_limits, check_received, check_applied):
+    rig = _running_at_110(make_rig, seed=3)
     # then they stop: after command_timeout the output ramps 110 -> 20 V at the slew limit, then keepalive
     assert rig.run_until(lambda: rig.link.health.watchdog_active and rig.device.received[-1] == test_limits.v_safe
                          and rig.device.plant.u_applied == test_limits.v_safe, DEADLINE, command=False)
@@ -153,14 +159,7 @@ def test_a_stream_of_refused_commands_is_no_sign_of_life_for_the_watchdog(make_r
                                                                            check_applied):
     """NaN and 1e300 commands kept the watchdog fed: the output held 75 V for seconds of garbage instead of
     ramping to v_safe, while /diagnostics said 'running'."""
-    rig = make_rig("ascii", seed=4)
-    assert rig.run_until(lambda: rig.link.health.state == "running", DEADLINE)
-
-    def command_110() -> bool:
-        rig.link.command(110.0)
-        return rig.device.plant.u_applied == 110.0
-
-    assert rig.run_until(command_110, DEADLINE, command=False)
+    rig = _running_at_110(make_rig, seed=4)
     r0 = rig.link.health.rejected
 
     def garbage() -> bool:  # commands keep arriving, none of them usable
