@@ -6,7 +6,8 @@ set) is scanned for new rosbag2 directories or ``.mcap`` files that have not cha
 parameter services), then
 
 * the params file ``params_file`` is written atomically (an existing file the node did not write itself is only
-  replaced with ``overwrite: true``),
+  replaced with ``overwrite: true``: without it such a file is refused at start and when set, and one that appears
+  later is left alone when a fit would write it; a bag the node fits is never replaced),
 * a JSON summary is published on ``~/fit_result`` (``std_msgs/String``, transient local),
 * with ``controller_node`` set (e.g. ``/hyst_controller``) the ``model.*`` parameters are pushed to that node
   through its parameter service (``AsyncParameterClient.set_parameters_atomically``: all or nothing).
@@ -82,8 +83,8 @@ class IdentConfig:
 
     def _check_params_file(self) -> None:
         """Refused now, not after a fit: a directory, or one of the bags (or a file in one) even with ``overwrite``
-        (a 1.2 MB recording became a 1 kB params file). An existing file is judged when a fit writes it: the node
-        replaces what it wrote itself."""
+        (a 1.2 MB recording became a 1 kB params file). An existing file is :func:`_refuse_existing`'s: it depends
+        on what the node wrote itself, which a configuration does not know."""
         target = os.path.realpath(self.params_file)
         if os.path.isdir(target):
             raise ValueError(f"params_file {self.params_file!r} is a directory; give a file path")
@@ -234,6 +235,15 @@ def controller_parameters(model, theta, dt: float) -> list[Parameter]:
     return out
 
 
+def _refuse_existing(cfg: IdentConfig, written_by_me: set[str]) -> None:
+    """An existing params_file the node did not write, without ``overwrite``: refused at start (and when set), not
+    after the first fit as before, with this node's own words (it said "use --force")."""
+    if cfg.params_file and not cfg.overwrite:
+        target = os.path.abspath(cfg.params_file)
+        if os.path.exists(target) and target not in written_by_me:
+            raise ValueError(f"params_file {cfg.params_file!r} exists; set overwrite:=true to replace it")
+
+
 class IdentNode(AtomicParametersNode):
     """Refits the stage model from bags; see the module docstring."""
 
@@ -242,13 +252,14 @@ class IdentNode(AtomicParametersNode):
         self._declare()
         try:
             self._cfg = self._read().validate()
+            self._written_by_me: set[str] = set()
+            _refuse_existing(self._cfg, self._written_by_me)
         except ValueError as err:
             raise HystError(f"invalid parameters: {err}") from err
         self.add_on_set_parameters_callback(self._on_set)
         self._queue: list[str] = list(self._cfg.bags)
         self._seen: set[str] = set(os.path.abspath(b) for b in self._cfg.bags)
         self._sizes: dict[str, tuple[int, float]] = {}
-        self._written_by_me: set[str] = set()
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hyst_fit")
         self._job: Future | None = None
         self._job_bag = ""
@@ -319,6 +330,8 @@ class IdentNode(AtomicParametersNode):
     def _on_set(self, params) -> SetParametersResult:
         try:
             cfg = self._read({p.name: p.value for p in params}).validate()
+            if (cfg.params_file, cfg.overwrite) != (self._cfg.params_file, self._cfg.overwrite):
+                _refuse_existing(cfg, self._written_by_me)  # judged when it changes, not on every set
         except (ValueError, TypeError) as err:
             return SetParametersResult(successful=False, reason=str(err))
         new_bags = [b for b in cfg.bags if os.path.abspath(b) not in self._seen]

@@ -14,6 +14,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from hyst_model.core import PARAM_NAMES, pea_default
+from hyst_model.errors import HystError
 from hyst_model.ident_node import IdentConfig, IdentNode
 from hyst_model.io import read_params, write_state_bag
 
@@ -97,11 +98,20 @@ def test_watched_folder_bad_bag_survives_and_params_file_is_protected(tmp_path, 
     watch.mkdir()
     out = tmp_path / "model.yaml"
     out.write_text("user's own file\n")
-    node = IdentNode(context=ctx, parameter_overrides=[
-        Parameter("watch_dir", Parameter.Type.STRING, str(watch)),
-        Parameter("poll_period", Parameter.Type.DOUBLE, 0.1),
-        Parameter("settle_time", Parameter.Type.DOUBLE, 0.2),
-        Parameter("params_file", Parameter.Type.STRING, str(out))])
+    overrides = [Parameter("watch_dir", Parameter.Type.STRING, str(watch)),
+                 Parameter("poll_period", Parameter.Type.DOUBLE, 0.1),
+                 Parameter("settle_time", Parameter.Type.DOUBLE, 0.2),
+                 Parameter("params_file", Parameter.Type.STRING, str(out))]
+    # an existing file is refused at start (it was refused only after the first fit, saying "use --force")
+    with pytest.raises(HystError, match="exists; set overwrite:=true"):
+        IdentNode(context=ctx, parameter_overrides=overrides)
+    out.unlink()
+    node = IdentNode(context=ctx, parameter_overrides=overrides)
+    other = tmp_path / "other.yaml"
+    other.write_text("another file of the user's\n")
+    r = node.set_parameters([Parameter("params_file", Parameter.Type.STRING, str(other))])[0]
+    assert not r.successful and "exists; set overwrite:=true" in r.reason
+    out.write_text("user's own file\n")  # written after the start: judged when a fit writes it
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     received = []
