@@ -472,7 +472,7 @@ class ControllerNode(AtomicParametersNode):
         if others:  # two sources of /stage/command: the stage follows whichever wrote last
             level = max(level, DiagnosticStatus.WARN)
             message += (f"; {others} other publisher(s) on {self._cmd_pub.topic_name}: another controller or "
-                           "excitation is commanding this stage too")
+                        "excitation is commanding this stage too")
         vals = dict(self._n, algorithm=self._settings.algorithm, other_command_publishers=others,
                     compensated=",".join(self._compensating))
         if self._unused:

@@ -127,9 +127,9 @@ class ExcitationSpec:
             raise ConfigError(f"frequency must be in (0, {nyq:g}) Hz, got {self.frequency:g}")
         if self.periods < 1 or self.n_steps < 1 or self.hold < 0 or self.seconds <= 0 or not self.step_rise >= 0:
             raise ConfigError("periods and n_steps must be >= 1, hold >= 0 s, step_rise >= 0 s, seconds > 0 s")
-        length = self.samples * self.dt
-        if length > MAX_SECONDS:
-            raise ConfigError(f"the excitation would last {length:.4g} s ({self.samples:.4g} samples); at most "
+        n = self.samples
+        if n * self.dt > MAX_SECONDS:
+            raise ConfigError(f"the excitation would last {n * self.dt:.4g} s ({n:.4g} samples); at most "
                               f"{MAX_SECONDS:g} s is built (check hold, periods, n_steps, step_rise, frequency, "
                               "seconds)")
 

@@ -36,6 +36,7 @@ from .emulated_device import FAULTS, EmulatedDevice, FaultRates
 
 __all__ = ["EmulatedDevice", "PtyEmulator", "FaultRates", "FAULTS", "main"]
 
+
 def _is_pty_link(path: str) -> bool:
     """A symlink to a pseudo-terminal (what an emulator's port link is), not a user's file."""
     return os.path.islink(path) and os.readlink(path).startswith(("/dev/pts/", "/dev/tty"))

@@ -88,9 +88,9 @@ class IdentConfig:
         target = os.path.realpath(self.params_file)
         if os.path.isdir(target):
             raise ValueError(f"params_file {self.params_file!r} is a directory; give a file path")
-        for bag in self.bags + ((self.watch_dir,) if self.watch_dir else ()):
+        for bag in self.bags:
             b = os.path.realpath(bag)
-            if target == b or target.startswith(b + os.sep) and bag != self.watch_dir:
+            if target == b or target.startswith(b + os.sep):
                 raise ValueError(f"params_file {self.params_file!r} would replace the recording {bag!r}")
 
     def validate(self) -> "IdentConfig":

@@ -6,7 +6,7 @@ import re
 import numpy as np
 import pytest
 
-from hyst_model.diagnose.report import MARKER, prepare_dir, write_report
+from hyst_model.diagnose.report import MARKER, check_report_dir, write_report
 from hyst_model.diagnose.stats import compare_stats
 from hyst_model.errors import HystError
 from hyst_model.io.record import Record
@@ -71,11 +71,11 @@ def test_directory_policy(tmp_path):
     # a hyst report directory that later got a foreign file is refused too
     (foreign / "notes.txt").write_text("mine")
     with pytest.raises(HystError, match="did not write"):
-        prepare_dir(foreign)
+        check_report_dir(foreign)
     f = tmp_path / "file"
     f.write_text("x")
     with pytest.raises(HystError, match="is a file"):
-        prepare_dir(f)
+        check_report_dir(f)
 
 
 def test_length_mismatch_is_an_error(tmp_path):
@@ -89,8 +89,6 @@ def test_length_mismatch_is_an_error(tmp_path):
 def test_another_commands_report_needs_force_and_a_rerun_leaves_no_stale_plot(tmp_path):
     """hyst compare then hyst diagnose into one directory: the diagnose report replaced the compare report
     without a word (and one written after a diagnose kept its ladder plot)."""
-    from hyst_model.diagnose.report import check_report_dir
-
     rec, yhat = _record()
     st = compare_stats(rec.t, rec.u, rec.y, yhat)
     d = tmp_path / "out"

@@ -70,7 +70,7 @@ def _missing_input(args: argparse.Namespace) -> str | None:
 
 #: Output arguments (attribute → option) and every argument naming a file the command reads.
 _OUTPUTS = {"out": "--out", "report": "--report"}
-_READS = ("data", "params", "input", "scenario", "effect_module")
+_READS = (*_INPUT_PATHS, "scenario", "effect_module")
 
 
 def _same(a: str, b: str) -> bool:

@@ -32,11 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from ..io.modes import mkstemp_user
-from .report_dir import MARKER, check_report_dir, commit_report, prepare_dir
+from .report_dir import MARKER, check_report_dir, commit_report
 from ..errors import HystError
 
-__all__ = ["write_report", "findings", "MARKER", "prepare_dir", "check_report_dir"]
+__all__ = ["write_report", "findings", "MARKER", "check_report_dir"]
 
 def _um(x: float) -> str:
     from ..effects.signals import fmt_len
@@ -134,14 +133,8 @@ def findings(st) -> list[str]:
 
 
 def _save(fig, path: Path) -> None:
-    fd, tmp = mkstemp_user(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    """Into the report's staging directory: the whole report is moved into place at the end (write_report)."""
+    fig.savefig(path, dpi=110)
 
 
 def _scale(y: np.ndarray) -> tuple[float, str]:
@@ -360,7 +353,4 @@ def _write_into(d: Path, t, u, y, yhat, record, stats, ladder, diagnosis, title)
            "margin:.5em 0}td,th{border:1px solid #bbb;padding:2px 8px;text-align:right}img{max-width:100%}")
     doc = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title or 'hyst report')}"
            f"</title><style>{css}</style></head><body>{''.join(parts)}</body></html>\n")
-    fd, tmp = mkstemp_user(prefix=".index.", suffix=".html", dir=d)
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        fh.write(doc)
-    os.replace(tmp, d / "index.html")
+    (d / "index.html").write_text(doc, encoding="utf-8")

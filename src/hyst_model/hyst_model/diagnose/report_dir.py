@@ -9,7 +9,7 @@ from pathlib import Path
 from ..errors import HystError
 from ..io.modes import user_umask
 
-__all__ = ["MARKER", "OURS", "check_report_dir", "prepare_dir", "commit_report"]
+__all__ = ["MARKER", "OURS", "check_report_dir", "commit_report"]
 
 #: A file hyst writes into every report directory; a directory without it but with other files is not ours.
 MARKER = ".hyst-report"
@@ -55,29 +55,6 @@ def check_report_dir(path: str | os.PathLike, force: bool = False, kind: str = "
         if other is not None and other != kind:
             raise HystError(f"report directory {d} holds a hyst {other} report; give the {kind} report its own "
                             "directory or pass --force to replace it")
-    return d
-
-
-def prepare_dir(path: str | os.PathLike, force: bool = False, kind: str = "report") -> Path:
-    """Create ``path`` or check that it may take the report (:func:`check_report_dir`); return it, emptied of a
-    previous report's plots (a diagnose report's ladder plot stayed beside a compare report written after it).
-    """
-    d = check_report_dir(path, force, kind)
-    if d.is_dir():
-        for name in OURS - {MARKER}:
-            try:
-                (d / name).unlink()
-            except FileNotFoundError:
-                pass
-            except OSError as err:
-                raise HystError(f"cannot replace {d / name}: {err}") from err
-    else:
-        try:
-            d.mkdir(parents=True)
-        except OSError as err:
-            raise HystError(f"cannot create report directory {d}: {err}") from err
-    (d / MARKER).write_text(f"written by hyst {kind}; files listed in index.html are replaced on the next "
-                            f"{kind} report\n")
     return d
 
 

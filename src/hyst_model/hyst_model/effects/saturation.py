@@ -94,9 +94,9 @@ class Saturation(Effect):
         return soft_limit(y, top, bottom, w, self.two_sided)
 
     def settle(self, theta, x):
-        """A two-sided limit whose knee no sample of the inner output ``x`` enters is moved out to the bound (the
-        acting knee width kept): the same output on the record, bit for bit, and no stop where the record shows
-        none (:mod:`.settle`). The top alone has nothing to settle: without it the effect does nothing."""
+        """Each limit of a two-sided saturation whose knee no sample of the inner output ``x`` enters is moved out
+        to half the limits' range (the acting knee width kept): the same output on the record, bit for bit, and no
+        stop where the record shows none (:mod:`.settle`). A one-sided limit is left as fitted."""
         top, bottom, w = (float(v) for v in theta)
         if not self.two_sided or not np.all(np.isfinite(x)):
             return theta

@@ -6,11 +6,11 @@ convention (``fit`` returns self; ``theta_``, ``params_``, ``result_``). See :mo
 """
 from __future__ import annotations
 
-from hyst_common.blas import one_blas_thread
-
 import importlib
 from collections.abc import Callable
 from typing import TYPE_CHECKING
+
+from hyst_common.blas import one_blas_thread
 
 from ..errors import FitError
 from .methods import METHODS, estimator_class

@@ -9,11 +9,11 @@ data do not determine it): the fit is not to be trusted without a look. Both are
 """
 from __future__ import annotations
 
-from hyst_common.blas import one_blas_thread
-
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+
+from hyst_common.blas import one_blas_thread
 
 from ..core.bounded import DIVERGENCE_SPANS, probe_range
 from ..errors import FitError

@@ -3,8 +3,7 @@
 This is the classical approach the thesis compares EPSO against (§3.4.3, model validation: "the common
 identification technique is not effective"): trust-region-reflective least squares
 (:func:`scipy.optimize.least_squares`) started from the model's declared defaults, one start, no equation-error
-initialisation. It shows what :mod:`.fast` gains from its
-starts.
+initialisation. It shows what :mod:`.fast` gains from its starts.
 """
 from __future__ import annotations
 
