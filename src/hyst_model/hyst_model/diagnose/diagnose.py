@@ -7,8 +7,8 @@ The engine (:func:`diagnose`)
    whole record;
    their parameters only ever see the training samples, so a free parameter earns nothing unless it predicts
    held-out data — and the validation RMSE at each ladder rung is the number ``hyst fit --effects`` reports;
-2. estimates the sensor noise floor from the measured output (second differences, robust) — the best any model
-   can do;
+2. estimates the sensor noise floor from the measured output (second differences, robust) with any line the
+   input does not drive (mains pickup, :mod:`.lines`) — the best any model can do;
 3. fits the base model (``mbw`` or ``bw``) with :func:`hyst_model.identify.fit`;
 4. for every candidate effect computes its residual signature (a score and a sentence of evidence) and screens
    it: the effect's few parameters (and the offset) fitted from its data-driven start on top of the base model
@@ -57,6 +57,7 @@ from .prune import prune
 from .reconfig import reconfigure
 from .swap import swap
 from .jointly import joint_pair
+from .lines import Line, disturbance_lines, floor_with_lines
 from .ladder import climb
 from .setup import Candidate, Rung, Setup
 from .stages import refit_all, screen_all
@@ -87,11 +88,17 @@ class Diagnosis:
     unexplained: Unexplained | None = None  # the error left ≥ UNEXPLAINED_FACTOR × noise, described
     caution: str | None = None  # the base does not carry over to the hold-out: the record may not determine it
     undetermined: list = field(default_factory=list)  # effects the record cannot tell apart (.undetermined)
+    #: The white part of the floor (second differences) and the output's lines the input does not drive
+    #: (.lines); ``noise`` is the two together.
+    noise_white: float | None = None
+    disturbances: list = field(default_factory=list)
 
     def to_json(self) -> dict:
         return {
             "baseline": {"model": self.base, "rmse": self.baseline_rmse, "rmse_train": self.baseline_rmse_train},
             "noise_floor": self.noise,
+            "noise_floor_white": self.noise if self.noise_white is None else self.noise_white,
+            "disturbances": [ln.to_json() for ln in self.disturbances],
             "candidates": [{"effect": c.effect, "rmse": c.rmse, "improvement": c.improvement,
                             "significant": c.significant, "score": c.score, "t_stat": c.t_stat,
                             "rmse_without": c.rmse_without,
@@ -201,10 +208,16 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     # sensor noise, so the smaller is kept.
     noise = noise_floor(y)
     noise = min(noise, noise_floor(e_base)) if noise_floor(e_base) > 0 else noise
+    # A line in the output the input does not drive (mains pickup) is noise no model removes, but Δ² hardly sees
+    # it: the floor includes it (.lines), found in the base's residual and again in the final model's below.
+    white = noise
+    lines = disturbance_lines(t, u, e_base, white)
+    noise = floor_with_lines(white, lines)
     s = Setup(t, u, y, val, dt, cfg, fixed, base, base_model, names, fit_, say, noise, th_base, e_base,
               min_factor, t_min, noise_margin, full_rate_top, max_rungs,
               default_jobs() if jobs is None else max(1, int(jobs)))
     say(f"base {base}: validation RMSE {fmt_len(s.base_val)}, noise floor {fmt_len(noise)}"
+        + (f" (white {fmt_len(white)} and {_said(lines)})" if lines else "")
         + (" (at the noise floor)" if s.at_floor else ""), step=False)
 
     cands, carry, full = screen_all(s)                               # 1. each effect on the base held fixed
@@ -217,6 +230,14 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         chosen = prune(s, ladder, models, chosen, cands)
     if reconfigure(s, ladder, models, chosen, cands):                 # 3d. and each effect's configuration
         chosen = prune(s, ladder, models, chosen, cands)
+    if ladder[-1].model != base:   # a line the base's larger error hid (a step record's transients)
+        m_fin, th_fin = models[ladder[-1].model]
+        more = disturbance_lines(t, u, y - _simulate(m_fin, th_fin, t, u), white)
+        if floor_with_lines(white, more) > noise:
+            lines, noise = more, floor_with_lines(white, more)
+            s.noise = noise
+            say(f"noise floor {fmt_len(noise)}: white {fmt_len(white)} and {_said(lines)} in the final model's "
+                "residual", step=False)
     ranked, missing, unexplained, expl = verdict(s, cands, ladder, models, chosen, unexplained_factor,
                                                  _explain)           # 4. the answer in words
     base_train = rmse(s.e_base[train])
@@ -233,10 +254,19 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     und = undetermined(s, full, cands, list(chosen))                 # 5. what the record cannot tell apart
     if und:
         expl = f"{expl}; {sentence(und, noise, dt, (float(np.min(u)), float(np.max(u))))}"
+    if lines:
+        expl = (f"{expl}; the noise floor {fmt_len(noise)} holds white sensor noise ({fmt_len(white)}) and "
+                f"{_said(lines)} that the input does not drive (mains pickup or an amplifier's ripple?): no "
+                "model of the stage removes them — filter or shield the sensor to go below")
     # what the user is handed: no stop where the record shows none (the same output on the record: .settle)
     models = {k: (m, settle(m, th, t, u)) for k, (m, th) in models.items()}
     return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
-                     time.perf_counter() - t0, models, unexplained, caution, und)
+                     time.perf_counter() - t0, models, unexplained, caution, und, white, lines)
+
+
+def _said(lines: list[Line]) -> str:
+    parts = [f"{ln.frequency:.4g} Hz ({fmt_len(ln.amplitude)} amplitude)" for ln in lines]
+    return ("a line at " if len(lines) == 1 else "lines at ") + ", ".join(parts)
 
 
 def _explain(c: Candidate, base: str, base_val: float) -> str:

@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.signal import lfilter
 
 from hyst_common.profiles import GMA, PEA, get_profile
 from hyst_model.core import MBWParams, stage_model
@@ -11,7 +12,8 @@ from hyst_model.core import MBWParams, stage_model
 from .excitation import EXCITATIONS, excitation
 from .forms import FORMS, LIBRARY_NAME, Ctx, draw
 
-__all__ = ["Case", "generate_case", "case_family", "family_kinds", "KINDS", "EXPECTED", "SHAPES", "FAMILY_WEIGHTS"]
+__all__ = ["Case", "generate_case", "case_family", "family_kinds", "KINDS", "EXPECTED", "SHAPES", "SENSORS",
+           "FAMILY_WEIGHTS"]
 
 #: Case kinds drawn by :func:`case_family`: one effect (large ≥ 5× noise, small 3–5×), a pair, an effect outside
 #: the library, none, and a non-MBW (Prandtl–Ishlinskii) truth with no effect.
@@ -55,6 +57,33 @@ def _mbw_truth(profile: str, rng: np.random.Generator) -> MBWParams:
 
 #: Truth families: the thesis's identified shape with its scales varied, or shapes drawn wide (other actuators).
 SHAPES = ("thesis", "wide")
+#: Sensor noise: white (the benchmark's own), white with mains pickup (a 50 or 60 Hz line and its third harmonic)
+#: or white with band-limited noise (sensor electronics slower than the sampling).
+SENSORS = ("white", "hum", "coloured")
+
+
+def _sensor(kind: str, seed: int, t: np.ndarray, noise: float, record: int) -> np.ndarray:
+    """What the sensor adds besides the white noise (m), drawn from its own stream (``seed``; the white families
+    are unchanged): the same pickup or noise band on the fresh record (``record`` 1), with a new phase or
+    realisation."""
+    if kind == "white":
+        return np.zeros(t.size)
+    rng = np.random.default_rng([seed, 7919])                  # the sensor: one draw for both records
+    phases = np.random.default_rng([seed, 7919, record])       # the record: its own phase / realisation
+    if kind == "hum":
+        f = float(rng.choice([50.0, 60.0])) * rng.uniform(0.998, 1.002)   # the grid's frequency tolerance
+        a = rng.uniform(1.0, 4.0) * noise
+        a3 = rng.uniform(0.1, 0.4) * a
+        return (a * np.sin(2 * np.pi * f * t + phases.uniform(0, 2 * np.pi))
+                + a3 * np.sin(6 * np.pi * f * t + phases.uniform(0, 2 * np.pi)))
+    if kind == "coloured":
+        rate = 1.0 / float(t[1] - t[0])
+        fc = min(float(np.exp(rng.uniform(np.log(20.0), np.log(200.0)))), 0.25 * rate)
+        level = rng.uniform(1.0, 3.0) * noise
+        c = np.exp(-2 * np.pi * fc / rate)                       # first-order low-pass, unit variance
+        x = lfilter([np.sqrt(1 - c * c)], [1.0, -c], phases.standard_normal(t.size))
+        return level * x
+    raise ValueError(f"sensor must be one of {', '.join(SENSORS)}, not {kind!r}")
 
 
 def _wide_truth(profile: str, rng: np.random.Generator) -> MBWParams:
@@ -130,15 +159,19 @@ def _calibrate(name: str, ctx: Ctx, draws: dict[str, dict], target: float) -> tu
 
 
 def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, duration: float = DURATION,
-                  shapes: str = "thesis") -> Case:
+                  shapes: str = "thesis", sensor: str = "white") -> Case:
     """One case, fully determined by ``seed`` (and ``kind``; drawn from :data:`KINDS` if omitted).
 
     ``rate`` (Hz) and ``duration`` (s) set the record's sampling; the defaults are the benchmark's own family, and
     other values give families the diagnosis was not developed on (a mode's frequency stays below 0.35 × rate).
     ``shapes``: the MBW truths' family (:data:`SHAPES`): ``"thesis"`` (the benchmark's own) or ``"wide"``.
+    ``sensor`` (:data:`SENSORS`): what the sensor adds to the white noise — nothing (the benchmark's own), mains
+    pickup or band-limited noise; the rest of the case is the same as with white noise.
     """
     if shapes not in SHAPES:
         raise ValueError(f"shapes must be one of {', '.join(SHAPES)}, not {shapes!r}")
+    if sensor not in SENSORS:
+        raise ValueError(f"sensor must be one of {', '.join(SENSORS)}, not {sensor!r}")
     if not (rate > 0 and duration > 0 and rate * duration >= 1000):
         raise ValueError(f"a case needs a positive rate and duration and at least 1000 samples "
                          f"(rate {rate} Hz, duration {duration} s)")
@@ -185,12 +218,12 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
         strengths.append((f, amp))
         sizes.append(s / noise)
     ua, y = _apply(strengths, ctx, draws)
-    y = y + noise * nrng.standard_normal(t.size)
+    y = y + noise * nrng.standard_normal(t.size) + _sensor(sensor, seed, t, noise, 0)
     # fresh record of the same stage: new noise; random excitations get a new realisation too
     fresh_u_seed = int(seeds[0]) if exc in ("triangles", "sweep") else int(seeds[2])
     uf, xf, ctxf, nrng_f = record(fresh_u_seed, int(seeds[2]) + 1)
     _, yf = _apply(strengths, ctxf, draws)
-    yf = yf + noise * nrng_f.standard_normal(t.size)
+    yf = yf + noise * nrng_f.standard_normal(t.size) + _sensor(sensor, seed, t, noise, 1)
     expected: tuple[str, ...]
     if kind == "pi_truth":
         expected = ("pi_truth",)
@@ -202,9 +235,9 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
 
 
 def case_family(n: int, seed: int = 0, *, rate: float = RATE, duration: float = DURATION,
-                shapes: str = "thesis") -> list[Case]:
+                shapes: str = "thesis", sensor: str = "white") -> list[Case]:
     """``n`` cases with a balanced mix of :data:`KINDS` (singles weighted up), seeds ``seed*100000 + i``."""
-    return [generate_case(seed * 100000 + i, k, rate=rate, duration=duration, shapes=shapes)
+    return [generate_case(seed * 100000 + i, k, rate=rate, duration=duration, shapes=shapes, sensor=sensor)
             for i, k in enumerate(family_kinds(n))]
 
 

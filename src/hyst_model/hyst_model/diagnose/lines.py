@@ -1,0 +1,200 @@
+"""Spectral lines in the output that the input does not drive: mains pickup, an amplifier's ripple, a fan.
+
+A capacitive or inductive position sensor on a lab bench often picks up the mains (50 or 60 Hz and its odd
+harmonics) or an amplifier's switching ripple. That is part of what no stage model can predict — sensor noise
+that is not white — yet the noise floor of :func:`~hyst_model.effects.signals.noise_floor` (second differences)
+barely sees it (a 50 Hz line at 2 kHz sampling keeps 0.2 % of its power in Δ²). Left out of the floor it makes a
+stage whose model is complete look 2× off: generated stages with no effect and a 3σ-amplitude hum were answered
+``unexplained`` (5 of 6) or ``dynamics`` (1 of 6).
+
+:func:`disturbance_lines` finds such lines in a model's residual and returns them, so the floor can include
+them (:func:`floor_with_lines`). A line counts only when all of these hold:
+
+* **it is a line**: its periodogram bin (Hann window) exceeds the local spectral level (median of the
+  neighbouring bins) by a factor a noise bin exceeds with probability ``FALSE_ALARM`` over the whole record
+  (the bin ratio of Gaussian noise is exponential: ``κ = ln(bins / FALSE_ALARM)``);
+* **the input does not drive it**: the input has no line at that frequency, and it is no sum or difference of
+  small multiples of the input's own lines (the harmonics and intermodulation a hysteresis makes of a sine or a
+  periodic excitation);
+* **it is stationary**: at least ten cycles in each quarter of the record, and fitted on each quarter separately, its amplitude and phase stay those of the
+  whole record — a disturbance from outside is, a model error driven by an excitation that changes is not;
+* **it matters**: its RMS is at least ``MIN_SHARE`` of the white-noise floor (smaller ones change the floor by
+  little).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.ndimage import median_filter
+
+__all__ = ["Line", "disturbance_lines", "floor_with_lines", "FALSE_ALARM", "MIN_SHARE", "MAX_LINES"]
+
+#: Chance that white or smoothly coloured noise alone shows a line anywhere in one record.
+FALSE_ALARM = 1e-3
+#: A line is kept when its RMS is at least this share of the white-noise floor.
+MIN_SHARE = 0.5
+#: At most this many lines (a fundamental and a few harmonics).
+MAX_LINES = 4
+#: Half-width (bins) of the neighbourhood whose median is the local spectral level.
+_LOCAL = 40
+#: Half-width (bins) kept clear around a line: a Hann window spreads a line over about ±2 bins.
+_CLEAR = 3
+#: Multiples of the input's lines whose sums and differences are excluded (harmonics and intermodulation): a
+#: dead zone driven by two sines left lines at order 40 (generated stage 9930020); fewer for more lines, so the
+#: grid of combinations stays below _GRID.
+_ORDER, _GRID = 60, 1_000_000
+#: Lowest bin looked at: ten cycles in each quarter of the record, so the quarters can test stationarity and a
+#: slow trend (a drift's spectrum falls off from DC) is not taken for a line.
+_MIN_BIN = 40
+#: How far each quarter's amplitude (relative) and phase (rad) may stray from the whole record's.
+_AMP_TOL, _PHASE_TOL = 0.35, 0.5
+
+
+@dataclass(frozen=True)
+class Line:
+    """A sinusoid in the output at a frequency the input does not drive (SI: Hz, m)."""
+
+    frequency: float     # Hz
+    amplitude: float     # m, peak
+    rms: float           # m (amplitude / √2)
+    ratio: float         # its periodogram bin over the local spectral level
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def _spectrum(x: np.ndarray) -> np.ndarray:
+    w = np.hanning(x.size)
+    return np.abs(np.fft.rfft((x - x.mean()) * w)) ** 2
+
+
+def _level(p: np.ndarray) -> np.ndarray:
+    """Local spectral level: the running median over ±_LOCAL bins, scaled to the mean of an exponential bin."""
+    return median_filter(p, size=2 * _LOCAL + 1, mode="nearest") / np.log(2.0)
+
+
+def _peaks(p: np.ndarray, kappa: float) -> np.ndarray:
+    """Bins that exceed ``kappa`` × the local level and are the largest within ±_CLEAR (DC left out)."""
+    ratio = p / np.maximum(_level(p), 1e-300)
+    ratio[:_MIN_BIN] = 0.0
+    big = np.flatnonzero(ratio > kappa)
+    return np.array([k for k in big if ratio[k] >= ratio[max(k - _CLEAR, 0):k + _CLEAR + 1].max()], dtype=int)
+
+
+def _driven(freqs: np.ndarray, f_max: float) -> np.ndarray:
+    """Frequencies (sorted) a nonlinearity makes of the input's lines ``freqs``: every Σ a_i·f_i up to ``f_max``
+    over the (at most 4) strongest, a_i integers up to :data:`_ORDER` in size (fewer for more lines) — and every multiple of each line.
+
+    A hysteresis driven by a few sines answers at their harmonics and intermodulation products of high order; by
+    frequency alone a disturbance there cannot be told from a model error, so such frequencies are left alone
+    (a sum of several sines covers most of the band: lines are then seldom found — the safe side)."""
+    freqs = np.asarray(freqs, dtype=np.float64)[:4]
+    if not freqs.size:
+        return np.zeros(0)
+    out = [f * np.arange(1, int(f_max / f) + 1) for f in freqs]
+    if freqs.size > 1:
+        order = min(_ORDER, int((_GRID ** (1.0 / freqs.size) - 1) // 2))
+        r = np.arange(-order, order + 1, dtype=np.float64)
+        grid = np.stack(np.meshgrid(*([r] * freqs.size), indexing="ij"), axis=-1).reshape(-1, freqs.size)
+        out.append(np.abs(grid @ freqs))
+    d = np.concatenate(out)
+    return np.sort(d[d <= f_max])
+
+
+def _near(sorted_f: np.ndarray, f: float, tol: float) -> bool:
+    i = int(np.searchsorted(sorted_f, f))
+    return any(abs(sorted_f[j] - f) <= tol for j in (i - 1, i) if 0 <= j < sorted_f.size)
+
+
+def _sinusoid(t: np.ndarray, x: np.ndarray, f: float) -> tuple[float, float]:
+    """Least-squares amplitude and phase of a sinusoid at ``f`` (with an offset) in ``x``."""
+    w = 2.0 * np.pi * f * t
+    A = np.column_stack([np.cos(w), np.sin(w), np.ones_like(t)])
+    c, *_ = np.linalg.lstsq(A, x, rcond=None)
+    return float(np.hypot(c[0], c[1])), float(np.arctan2(-c[1], c[0]))
+
+
+def _refine(t: np.ndarray, x: np.ndarray, f0: float, df: float) -> float:
+    """The frequency near ``f0`` (within a bin) where the fitted sinusoid is largest (golden-section search)."""
+    lo, hi = f0 - df, f0 + df
+    g = 0.5 * (np.sqrt(5.0) - 1.0)
+    a, b = hi - g * (hi - lo), lo + g * (hi - lo)
+    fa, fb = _sinusoid(t, x, a)[0], _sinusoid(t, x, b)[0]
+    for _ in range(30):
+        if fa > fb:
+            hi, b, fb = b, a, fa
+            a = hi - g * (hi - lo)
+            fa = _sinusoid(t, x, a)[0]
+        else:
+            lo, a, fa = a, b, fb
+            b = lo + g * (hi - lo)
+            fb = _sinusoid(t, x, b)[0]
+    return 0.5 * (lo + hi)
+
+
+def _stationary(t: np.ndarray, x: np.ndarray, f: float, amp: float, phase: float) -> bool:
+    for q in np.array_split(np.arange(t.size), 4):
+        a, ph = _sinusoid(t[q], x[q], f)
+        if abs(a - amp) > _AMP_TOL * amp or abs(np.angle(np.exp(1j * (ph - phase)))) > _PHASE_TOL:
+            return False
+    return True
+
+
+def disturbance_lines(t: np.ndarray, u: np.ndarray, e: np.ndarray, noise: float) -> list[Line]:
+    """Lines in the residual ``e`` (m) the input ``u`` does not drive, strongest first (see the module).
+
+    Parameters
+    ----------
+    t, u, e : ndarray
+        Uniform time (s), input (V) and a model's residual (m) over the whole record.
+    noise : float
+        The white-noise floor (m): lines below ``MIN_SHARE`` of it are not reported.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    u = np.asarray(u, dtype=np.float64)
+    x = np.asarray(e, dtype=np.float64).copy()
+    n = x.size
+    if n < 16 * (2 * _LOCAL + 1) or not noise > 0 or not np.all(np.isfinite(x)):
+        return []
+    dt = float(t[1] - t[0])
+    df = 1.0 / (n * dt)
+    bins = n // 2 + 1
+    kappa = float(np.log(bins / FALSE_ALARM))
+    pu = _spectrum(u)
+    u_lines = np.flatnonzero(pu / np.maximum(_level(pu), 1e-300) > np.log(bins / 0.1))  # generous: exclude more
+    u_lines = u_lines[u_lines > _CLEAR]
+    # the input's strongest lines and what a nonlinearity makes of them
+    # (their frequencies refined within the bin: the 50th harmonic of a bin's centre can be 25 bins off)
+    top = [k for k in u_lines[np.argsort(pu[u_lines])[::-1]] if pu[k] >= pu[max(k - _CLEAR, 0):k + _CLEAR + 1].max()]
+    strongest = np.array([_refine(t, u, k * df, df) for k in top[:4]])
+    driven = _driven(strongest, 0.5 / dt)
+    found: list[Line] = []
+    refused: list[int] = []          # bins looked at and found not stationary
+    for _ in range(3 * MAX_LINES):
+        if len(found) == MAX_LINES:
+            break
+        p = _spectrum(x)
+        level = np.maximum(_level(p), 1e-300)
+        cands = [k for k in _peaks(p, kappa)
+                 if not np.any(np.abs(u_lines - k) <= _CLEAR)
+                 and not _near(driven, k * df, _CLEAR * df)
+                 and not any(abs(k - r) <= _CLEAR for r in refused)]
+        if not cands:
+            break
+        k = max(cands, key=lambda j: p[j])
+        f = _refine(t, x, k * df, df)
+        amp, phase = _sinusoid(t, x, f)
+        if amp / np.sqrt(2.0) < MIN_SHARE * noise:
+            break                    # the strongest left is too small to matter: so are the others
+        if not _stationary(t, x, f, amp, phase):
+            refused.append(k)
+            continue
+        found.append(Line(float(f), amp, amp / float(np.sqrt(2.0)), float(p[k] / level[k])))
+        x = x - amp * np.cos(2.0 * np.pi * f * t + phase)
+    return found
+
+
+def floor_with_lines(noise: float, lines: list[Line]) -> float:
+    """The floor no model of the stage can go below: white noise and the lines together (RMS, m)."""
+    return float(np.sqrt(noise ** 2 + sum(ln.rms ** 2 for ln in lines)))
