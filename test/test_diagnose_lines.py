@@ -111,3 +111,22 @@ def test_stage_with_mains_pickup_is_complete_and_says_why():
     w = generate_case(3, "none")
     dw = diagnose(w.t, w.u, w.y)
     assert dw.missing == "none" and dw.disturbances == [] and dw.noise_white == dw.noise
+
+
+def test_compare_names_pickup_not_a_resonance():
+    """``hyst compare``'s figures: a mains line in the residual is named as pickup, not listed as a resonance."""
+    from hyst_model.diagnose.report import findings
+    from hyst_model.diagnose.stats import compare_stats
+    rng = np.random.default_rng(12)
+    u = _steps(rng)
+    yhat = 1e-7 * u
+    y = yhat + SIGMA * rng.standard_normal(N) + 4 * SIGMA * np.sin(2 * np.pi * 50.0 * T + 0.3)
+    st = compare_stats(T, u, y, yhat)
+    lines = st.to_dict()["disturbances"]
+    assert len(lines) == 1 and abs(lines[0]["frequency"] - 50.0) < 0.02
+    said = " ".join(findings(st))
+    assert "mains pickup" in said and "50 Hz" in said
+    assert any(abs(p["freq"] - 50.0) <= 1.0 for p in st.extra["peaks"])      # the spectrum's peak is there ...
+    assert not any("resonances" in f and "50 Hz" in f for f in findings(st))  # ... but not called a resonance
+    clean = compare_stats(T, u, yhat + SIGMA * rng.standard_normal(N), yhat)
+    assert clean.to_dict()["disturbances"] == [] and "mains" not in " ".join(findings(clean))

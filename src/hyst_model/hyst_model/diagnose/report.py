@@ -77,7 +77,16 @@ def findings(st) -> list[str]:
         out.append(f"After the step at t = {r['t']:.4g} s the output rings at ≈{r['freq']:.3g} Hz "
                    f"({_um(r['rms'])} RMS in the first 50 ms): a resonance of the stage the model lacks "
                    "(try the dynamics effect; sample fast enough to see it).")
-    peaks = st.extra.get("peaks") or []
+    lines = st.extra.get("disturbances") or []
+    if lines:
+        txt = ", ".join(f"{ln['frequency']:.4g} Hz ({_um(ln['amplitude'])} amplitude)" for ln in lines)
+        rms = float(np.sqrt(sum(ln["rms"] ** 2 for ln in lines)))
+        out.append(f"The output carries {'a line' if len(lines) == 1 else 'lines'} at {txt} that the input does not "
+                   f"drive ({_um(rms)} RMS of the residual): mains pickup or an amplifier's ripple — sensor noise no "
+                   "model of the stage removes (filter or shield the sensor).")
+    # a peak that is one of those lines is said above, not as a resonance
+    peaks = [p for p in st.extra.get("peaks") or []
+             if not any(abs(p["freq"] - ln["frequency"]) <= 1.0 for ln in lines)]
     if peaks:
         txt = ", ".join(f"{p['freq']:.4g} Hz ({p['ratio']:.0f}×)" for p in peaks)
         out.append(f"The residual spectrum has peaks at {txt} above its local level: resonances or "

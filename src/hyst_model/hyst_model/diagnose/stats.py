@@ -42,6 +42,7 @@ import numpy as np
 
 from .correlation import Correlation, auto_lag_step, autocorr, crosscorr, higher_order_tests, z_value
 from .figures import Fit, _as_1d, fit_figures, noise_sigma
+from .lines import disturbance_lines
 from .segments import Segment, SegmentFit, fit_by_segment, segment_input
 from .spectra import harmonics, ringing, spectral_peaks
 
@@ -220,7 +221,8 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
         auto=autocorr(e, max_lag, step, conf, dt), cross=crosscorr(e, u, max_lag, step, conf, dt),
         higher=higher_order_tests(e, u, max_lag, step, conf, dt), lag_step=step,
         extra={"loop_orientation": loop_orientation(u, y), "harmonics": _harmonic_summary(t, u, e),
-               "ringing": _ringing_summary(t, u, e, noise_sigma(y)), "peaks": _peak_summary(t, u, e, fs)})
+               "ringing": _ringing_summary(t, u, e, noise_sigma(y)), "peaks": _peak_summary(t, u, e, fs),
+               "disturbances": [ln.to_json() for ln in disturbance_lines(t, u, e, noise_sigma(y))]})
 
 
 def _peak_summary(t: np.ndarray, u: np.ndarray, e: np.ndarray, fs: float) -> list[dict[str, float]]:
