@@ -14,10 +14,11 @@ them (:func:`floor_with_lines`). A line counts only when all of these hold:
   neighbouring bins) by a factor a noise bin exceeds with probability ``FALSE_ALARM`` over the whole record
   (the bin ratio of Gaussian noise is exponential: ``κ = ln(bins / FALSE_ALARM)``);
 * **the input does not drive it**: the input has no line at that frequency, and it is no sum or difference of
-  small multiples of the input's own lines (the harmonics and intermodulation a hysteresis makes of a sine or a
+  multiples of the input's own lines (the harmonics and intermodulation a hysteresis makes of a sine or a
   periodic excitation);
-* **it is stationary**: at least ten cycles in each quarter of the record, and fitted on each quarter separately, its amplitude and phase stay those of the
-  whole record — a disturbance from outside is, a model error driven by an excitation that changes is not;
+* **it is stationary**: at least ten cycles in each quarter of the record, and fitted on each quarter separately,
+  its amplitude and phase stay those of the whole record — a disturbance from outside is, a model error driven
+  by an excitation that changes is not;
 * **it matters**: its RMS is at least ``MIN_SHARE`` of the white-noise floor (smaller ones change the floor by
   little).
 """
@@ -84,7 +85,8 @@ def _peaks(p: np.ndarray, kappa: float) -> np.ndarray:
 
 def _driven(freqs: np.ndarray, f_max: float) -> np.ndarray:
     """Frequencies (sorted) a nonlinearity makes of the input's lines ``freqs``: every Σ a_i·f_i up to ``f_max``
-    over the (at most 4) strongest, a_i integers up to :data:`_ORDER` in size (fewer for more lines) — and every multiple of each line.
+    over the (at most 4) strongest, a_i integers up to :data:`_ORDER` in size (fewer for more lines) — and every
+    multiple of each line.
 
     A hysteresis driven by a few sines answers at their harmonics and intermodulation products of high order; by
     frequency alone a disturbance there cannot be told from a model error, so such frequencies are left alone
