@@ -129,19 +129,20 @@ def run(args: argparse.Namespace) -> int:
     from ..identify.admissible import check_admissible
     best = d.ladder[-1]
     fm, fth = d.models[best.model]
-    adm = check_admissible(fm, fth, record=(rec.t, rec.u, rec.y))
+    y = d.record_fitted(rec.t, rec.y)   # without the lines the input does not drive, where diagnose found some
+    adm = check_admissible(fm, fth, record=(rec.t, rec.u, y))
     rmse_v, rmse_t, constrained = best.rmse, best.rmse_train, None
     if args.admissible:
         from ..diagnose.refit import validation_mask
         from ..effects.signals import fmt_len
         from ..identify.admissible import constrain, constrained_summary, require_remark
         require_remark(adm, best.model)
-        con = constrain(fm, rec.t, rec.u, rec.y, fth, validation_mask(len(rec.t), rec.u))  # diagnose's own split
+        con = constrain(fm, rec.t, rec.u, y, fth, validation_mask(len(rec.t), rec.u))  # diagnose's own split
         if con is not None:
             constrained = constrained_summary(best.rmse, adm.violations, con.rmse)
             fth, rmse_v, rmse_t = con.theta, con.rmse, con.rmse_train
             d.models[best.model] = (fm, fth)
-            adm = check_admissible(fm, fth, record=(rec.t, rec.u, rec.y))
+            adm = check_admissible(fm, fth, record=(rec.t, rec.u, y))
             if not args.quiet:
                 print(f"hyst diagnose: {best.model} refitted with Remark 4.1 and passive rate terms (ψ ≥ 0): "
                       f"validation RMSE {fmt_len(con.rmse)} (as diagnosed {fmt_len(best.rmse)}, outside them)",
@@ -157,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             from .compare import compare_record
             model, theta = d.models[d.base]
-            rec2, yhat, st = compare_record(rec, model, theta)
+            rec2, yhat, st = compare_record(rec, model, theta)   # the record as measured: its lines show
             out = _report.write_report(args.report, rec2, yhat, st,
                                        ladder=[_clean(r.__dict__) for r in d.ladder],
                                        diagnosis=_clean(d.to_json()), force=args.force, kind="diagnose",
@@ -170,11 +171,15 @@ def run(args: argparse.Namespace) -> int:
         from ..identify.input_range import identified_range
         from ..diagnose.diagnose import BLOCKS, SPLIT
         # the provenance hyst fit --out writes: the notes on the record, the hold-out, the samples
+        removed = d.disturbances[:d.n_removed]
+        notes = list(rec.meta.get("regularised", [])) + (
+            ["taken out of the output before fitting: " + ", ".join(
+                f"{ln.frequency:.4g} Hz ({ln.amplitude * 1e9:.3g} nm amplitude)" for ln in removed)] if removed else [])
         prov = {"method": "diagnose", "rmse": rmse_v, "rmse_train": rmse_t, "data": str(args.data),
                 "split": f"train on {1 - SPLIT:.0%} of the samples, validate on {SPLIT:.0%} in {BLOCKS} interleaved "
                          "blocks, free-run from rest at the record start",
                 "seconds": round(d.seconds, 3), "samples": len(rec),
-                **({"data_notes": "; ".join(rec.meta["regularised"])} if rec.meta.get("regularised") else {}),
+                **({"data_notes": "; ".join(notes)} if notes else {}),
                 "controllers": adm.controllers, **identified_range(rec.u, rec.y)}
         if constrained:
             from ..identify.admissible import provenance

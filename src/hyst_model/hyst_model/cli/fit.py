@@ -190,19 +190,24 @@ def run(args) -> int:
             print(f"hyst fit: {args.method} seed {args.seed} (--seed {args.seed} repeats this fit)", file=sys.stderr)
     res = fit(model, rec.t, rec.u, rec.y, method=args.method, seed=args.seed, split=split,
               progress=not args.quiet, **options)
+    res, y, removed = _without_lines(model, rec, res, split)
+    if removed and not args.quiet:
+        print(f"hyst fit: {removed} in the output, which the input does not drive (mains pickup or an amplifier's "
+              "ripple?), taken out of the record and the model refitted from its fit (as hyst diagnose does)",
+              file=sys.stderr)
     from ..effects.settle import settle_result
     from ..identify.admissible import check_admissible
     res = settle_result(model, res, rec.t, rec.u)  # no stop where the record shows none (effects.settle)
-    adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
+    adm = check_admissible(model, res.theta, record=(rec.t, rec.u, y))
     constrained = None
     if args.admissible:
         from ..identify.admissible import constrain, constrained_summary, require_remark
         require_remark(adm, args.model)
-        con = constrain(model, rec.t, rec.u, rec.y, res.theta, split)
+        con = constrain(model, rec.t, rec.u, y, res.theta, split)
         if con is not None:
             free, res = res, settle_result(model, con, rec.t, rec.u)
             constrained = constrained_summary(free.rmse, adm.violations, res.rmse)
-            adm = check_admissible(model, res.theta, record=(rec.t, rec.u, rec.y))
+            adm = check_admissible(model, res.theta, record=(rec.t, rec.u, y))
             if not args.quiet:
                 print(f"hyst fit: Remark 4.1 and passive rate terms (ψ ≥ 0) enforced: validation RMSE "
                       f"{res.rmse * 1e9:.2f} nm (free fit {free.rmse * 1e9:.2f} nm, outside them)", file=sys.stderr)
@@ -212,8 +217,10 @@ def run(args) -> int:
     if out is not None:
         prov = {"method": args.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": str(args.data),
                 "split": res.split, "seconds": round(res.seconds, 3), "samples": len(rec)}
-        if rec.meta.get("regularised"):
-            prov["data_notes"] = "; ".join(rec.meta["regularised"])
+        notes = list(rec.meta.get("regularised", [])) + ([f"taken out of the output before fitting: {removed}"]
+                                                          if removed else [])
+        if notes:
+            prov["data_notes"] = "; ".join(notes)
         if args.seed is not None:
             prov["seed"] = args.seed
         prov["controllers"] = adm.controllers
@@ -229,11 +236,38 @@ def run(args) -> int:
                "n_evaluations": res.n_evaluations, "split": res.split, "samples": len(rec), "dt": rec.dt,
                "data": str(args.data), "out": str(out) if out else None,
                "data_notes": list(rec.meta.get("regularised", [])), "admissibility": adm.to_json(),
+               "lines_removed": removed or None,
                "constrained": constrained}
         print(json.dumps(obj))
     else:
         print(_table(res, rec, out, adm))
     return 0
+
+
+def _without_lines(model, rec: Record, res, split):
+    """The fit on the record without the lines its residual shows that the input does not drive (mains pickup:
+    :mod:`hyst_model.diagnose.lines`, found and taken out as ``hyst diagnose`` does, then refitted from ``res`` by
+    its least squares); ``(res, y, said)`` — ``res``, the record's own output and ``""`` when there are none."""
+    from dataclasses import replace
+
+    from ..diagnose.lines import disturbance_lines, without_lines
+    from ..effects.signals import fmt_len, noise_floor
+    from ..identify import fit
+    with np.errstate(all="ignore"):
+        e = rec.y - np.asarray(model.simulate(res.theta, rec.t, rec.u), dtype=np.float64)
+    if not np.all(np.isfinite(e)):
+        return res, rec.y, ""
+    white = min(noise_floor(rec.y), noise_floor(e)) if noise_floor(e) > 0 else noise_floor(rec.y)
+    lines = disturbance_lines(rec.t, rec.u, e, white)
+    if not lines:
+        return res, rec.y, ""
+    y = without_lines(rec.t, rec.y, lines)
+    refit = fit(model, rec.t, rec.u, y, method="fast", split=split, theta0=res.theta, max_nfev=80)
+    # the fit is the user's method's, finished on the cleaned record: its name, time and work add up
+    refit = replace(refit, method=f"{res.method} (refitted without the lines)",
+                    seconds=res.seconds + refit.seconds, n_evaluations=res.n_evaluations + refit.n_evaluations)
+    said = ", ".join(f"{ln.frequency:.4g} Hz ({fmt_len(ln.amplitude)} amplitude)" for ln in lines)
+    return refit, y, ("a line at " if len(lines) == 1 else "lines at ") + said
 
 
 def _check_options(args) -> None:

@@ -29,7 +29,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.ndimage import median_filter
 
-__all__ = ["Line", "disturbance_lines", "floor_with_lines", "FALSE_ALARM", "MIN_SHARE", "MAX_LINES"]
+__all__ = ["Line", "disturbance_lines", "floor_with_lines", "without_lines", "FALSE_ALARM", "MIN_SHARE",
+           "MAX_LINES"]
 
 #: Chance that white or smoothly coloured noise alone shows a line anywhere in one record.
 FALSE_ALARM = 1e-3
@@ -45,6 +46,8 @@ _CLEAR = 3
 #: dead zone driven by two sines left lines at order 40 (generated stage 9930020); fewer for more lines, so the
 #: grid of combinations stays below _GRID.
 _ORDER, _GRID = 60, 1_000_000
+#: A line's bin is at least this many times every bin 1–2 window widths beside it.
+_NARROW = 10.0
 #: Lowest bin looked at: ten cycles in each quarter of the record, so the quarters can test stationarity and a
 #: slow trend (a drift's spectrum falls off from DC) is not taken for a line.
 _MIN_BIN = 40
@@ -60,6 +63,11 @@ class Line:
     amplitude: float     # m, peak
     rms: float           # m (amplitude / √2)
     ratio: float         # its periodogram bin over the local spectral level
+    phase: float = 0.0   # rad: the line is amplitude·cos(2π·frequency·t + phase) on the record's own time t
+
+    def signal(self, t: np.ndarray) -> np.ndarray:
+        """The line on the times ``t`` (s) of the record it was found in (m)."""
+        return self.amplitude * np.cos(2.0 * np.pi * self.frequency * np.asarray(t, dtype=np.float64) + self.phase)
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -75,12 +83,20 @@ def _level(p: np.ndarray) -> np.ndarray:
     return median_filter(p, size=2 * _LOCAL + 1, mode="nearest") / np.log(2.0)
 
 
+def _narrow(p: np.ndarray, k: int) -> bool:
+    """A line, not a hump: bin ``k`` is ``_NARROW`` × every bin 1–2 window widths beside it (a Hann line's
+    side lobes there are 10⁻³ of it; noise at a steep edge of the spectrum, or a resonance, stays alike there)."""
+    side = np.r_[p[max(k - 3 * _CLEAR, 0):max(k - _CLEAR, 0)], p[k + _CLEAR + 1:k + 3 * _CLEAR + 1]]
+    return bool(side.size) and bool(p[k] >= _NARROW * side.max())
+
+
 def _peaks(p: np.ndarray, kappa: float) -> np.ndarray:
-    """Bins that exceed ``kappa`` × the local level and are the largest within ±_CLEAR (DC left out)."""
+    """Narrow bins that exceed ``kappa`` × the local level and are the largest within ±_CLEAR (DC left out)."""
     ratio = p / np.maximum(_level(p), 1e-300)
     ratio[:_MIN_BIN] = 0.0
     big = np.flatnonzero(ratio > kappa)
-    return np.array([k for k in big if ratio[k] >= ratio[max(k - _CLEAR, 0):k + _CLEAR + 1].max()], dtype=int)
+    return np.array([k for k in big if ratio[k] >= ratio[max(k - _CLEAR, 0):k + _CLEAR + 1].max()
+                     and _narrow(p, k)], dtype=int)
 
 
 def _driven(freqs: np.ndarray, f_max: float) -> np.ndarray:
@@ -174,7 +190,10 @@ def disturbance_lines(t: np.ndarray, u: np.ndarray, e: np.ndarray, noise: float)
     u_lines = u_lines[u_lines > _CLEAR]
     # the input's strongest lines and what a nonlinearity makes of them
     # (their frequencies refined within the bin: the 50th harmonic of a bin's centre can be 25 bins off)
-    top = [k for k in u_lines[np.argsort(pu[u_lines])[::-1]] if pu[k] >= pu[max(k - _CLEAR, 0):k + _CLEAR + 1].max()]
+    # and only true lines: a band-limited noise input's edge passes the level test in places, and their products
+    # would cover every frequency (generated stage 6500021: 60 Hz pickup on a 2–20 Hz noise input, missed)
+    top = [k for k in u_lines[np.argsort(pu[u_lines])[::-1]]
+           if pu[k] >= pu[max(k - _CLEAR, 0):k + _CLEAR + 1].max() and _narrow(pu, k)]
     strongest = np.array([_refine(t, u, k * df, df) for k in top[:4]])
     driven = _driven(strongest, 0.5 / dt)
     found: list[Line] = []
@@ -198,11 +217,18 @@ def disturbance_lines(t: np.ndarray, u: np.ndarray, e: np.ndarray, noise: float)
         if not _stationary(t, x, f, amp, phase):
             refused.append(k)
             continue
-        found.append(Line(float(f), amp, amp / float(np.sqrt(2.0)), float(p[k] / level[k])))
-        x = x - amp * np.cos(2.0 * np.pi * f * t + phase)
+        found.append(Line(float(f), amp, amp / float(np.sqrt(2.0)), float(p[k] / level[k]), phase))
+        x = x - found[-1].signal(t)
     return found
 
 
 def floor_with_lines(noise: float, lines: list[Line]) -> float:
     """The floor no model of the stage can go below: white noise and the lines together (RMS, m)."""
     return float(np.sqrt(noise ** 2 + sum(ln.rms ** 2 for ln in lines)))
+
+
+def without_lines(t: np.ndarray, y: np.ndarray, lines: list[Line]) -> np.ndarray:
+    """The record ``y`` (m) with the ``lines`` found in it taken out (a copy; ``y`` itself when there are none)."""
+    if not lines:
+        return y
+    return np.asarray(y, dtype=np.float64) - sum(ln.signal(t) for ln in lines)
