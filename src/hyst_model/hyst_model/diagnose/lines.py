@@ -46,7 +46,7 @@ _CLEAR = 3
 #: dead zone driven by two sines left lines at order 40 (generated stage 9930020); fewer for more lines, so the
 #: grid of combinations stays below _GRID.
 _ORDER, _GRID = 60, 1_000_000
-#: A line's bin is at least this many times every bin 1–2 window widths beside it.
+#: A line's bin is at least this many times the median of the bins 1–2 window widths beside it.
 _NARROW = 10.0
 #: Lowest bin looked at: ten cycles in each quarter of the record, so the quarters can test stationarity and a
 #: slow trend (a drift's spectrum falls off from DC) is not taken for a line.
@@ -84,10 +84,11 @@ def _level(p: np.ndarray) -> np.ndarray:
 
 
 def _narrow(p: np.ndarray, k: int) -> bool:
-    """A line, not a hump: bin ``k`` is ``_NARROW`` × every bin 1–2 window widths beside it (a Hann line's
-    side lobes there are 10⁻³ of it; noise at a steep edge of the spectrum, or a resonance, stays alike there)."""
+    """A line, not a hump: bin ``k`` is ``_NARROW`` × the median of the bins 1–2 window widths beside it (a Hann
+    line's side lobes there are 10⁻³ of it; noise at a steep edge of the spectrum, or a resonance, stays alike
+    there; the median, so that a second line close by — two sines 1.25 Hz apart — does not count)."""
     side = np.r_[p[max(k - 3 * _CLEAR, 0):max(k - _CLEAR, 0)], p[k + _CLEAR + 1:k + 3 * _CLEAR + 1]]
-    return bool(side.size) and bool(p[k] >= _NARROW * side.max())
+    return bool(side.size) and bool(p[k] >= _NARROW * np.median(side))
 
 
 def _peaks(p: np.ndarray, kappa: float) -> np.ndarray:
@@ -96,7 +97,7 @@ def _peaks(p: np.ndarray, kappa: float) -> np.ndarray:
     ratio[:_MIN_BIN] = 0.0
     big = np.flatnonzero(ratio > kappa)
     return np.array([k for k in big if ratio[k] >= ratio[max(k - _CLEAR, 0):k + _CLEAR + 1].max()
-                     and _narrow(p, k)], dtype=int)
+                     and _narrow(p, int(k))], dtype=int)
 
 
 def _driven(freqs: np.ndarray, f_max: float) -> np.ndarray:
@@ -189,13 +190,21 @@ def disturbance_lines(t: np.ndarray, u: np.ndarray, e: np.ndarray, noise: float)
     u_lines = np.flatnonzero(pu / np.maximum(_level(pu), 1e-300) > np.log(bins / 0.1))  # generous: exclude more
     u_lines = u_lines[u_lines > _CLEAR]
     # the input's strongest lines and what a nonlinearity makes of them
-    # (their frequencies refined within the bin: the 50th harmonic of a bin's centre can be 25 bins off)
-    # and only true lines: a band-limited noise input's edge passes the level test in places, and their products
-    # would cover every frequency (generated stage 6500021: 60 Hz pickup on a 2–20 Hz noise input, missed)
+    # (their frequencies refined within the bin: the 50th harmonic of a bin's centre can be 25 bins off), and only
+    # true lines: a low-passed noise input's band passes the level test in places, and the products of such
+    # "lines" cover every frequency (generated stage 6500021: 60 Hz pickup on a noise input, missed).
+    # A line of the input that is not stationary (a triangle's amplitudes changing by thirds, the sines of one half
+    # of a mix) makes products that are not either, which the residual's own stationarity test refuses.
     top = [k for k in u_lines[np.argsort(pu[u_lines])[::-1]]
-           if pu[k] >= pu[max(k - _CLEAR, 0):k + _CLEAR + 1].max() and _narrow(pu, k)]
-    strongest = np.array([_refine(t, u, k * df, df) for k in top[:4]])
-    driven = _driven(strongest, 0.5 / dt)
+           if pu[k] >= pu[max(k - _CLEAR, 0):k + _CLEAR + 1].max() and _narrow(pu, int(k))]
+    strongest = []
+    for k in top:
+        f = _refine(t, u, k * df, df)
+        if _stationary(t, u, f, *_sinusoid(t, u, f)):
+            strongest.append(f)
+        if len(strongest) == 4:
+            break
+    driven = _driven(np.array(strongest), 0.5 / dt)
     found: list[Line] = []
     refused: list[int] = []          # bins looked at and found not stationary
     for _ in range(3 * MAX_LINES):
