@@ -46,8 +46,13 @@ _CLEAR = 3
 #: dead zone driven by two sines left lines at order 40 (generated stage 9930020); fewer for more lines, so the
 #: grid of combinations stays below _GRID.
 _ORDER, _GRID = 60, 1_000_000
-#: A line's bin is at least this many times the median of the bins 1–2 window widths beside it.
-_NARROW = 10.0
+#: The orders up to which a weak input line (below _NARROW_INPUT) joins the products.
+_WEAK_ORDER = 5
+#: A line's bin is at least this many times the median of the bins 1–2 window widths beside it — in the residual;
+#: an input line, whose products are left alone, the second: generated sines stood 10³–10⁸ above their side bins,
+#: the fundamental of triangles whose amplitude changes by thirds 600–900, a low-passed noise input's bins about
+#: 10 (generated stage 6500021: such "lines" and their products covered every frequency, and pickup was missed).
+_NARROW, _NARROW_INPUT = 10.0, 100.0
 #: Lowest bin looked at: ten cycles in each quarter of the record, so the quarters can test stationarity and a
 #: slow trend (a drift's spectrum falls off from DC) is not taken for a line.
 _MIN_BIN = 40
@@ -83,12 +88,12 @@ def _level(p: np.ndarray) -> np.ndarray:
     return median_filter(p, size=2 * _LOCAL + 1, mode="nearest") / np.log(2.0)
 
 
-def _narrow(p: np.ndarray, k: int) -> bool:
+def _narrow(p: np.ndarray, k: int, factor: float = 0.0) -> bool:
     """A line, not a hump: bin ``k`` is ``_NARROW`` × the median of the bins 1–2 window widths beside it (a Hann
     line's side lobes there are 10⁻³ of it; noise at a steep edge of the spectrum, or a resonance, stays alike
     there; the median, so that a second line close by — two sines 1.25 Hz apart — does not count)."""
     side = np.r_[p[max(k - 3 * _CLEAR, 0):max(k - _CLEAR, 0)], p[k + _CLEAR + 1:k + 3 * _CLEAR + 1]]
-    return bool(side.size) and bool(p[k] >= _NARROW * np.median(side))
+    return bool(side.size) and bool(p[k] >= (factor or _NARROW) * np.median(side))
 
 
 def _peaks(p: np.ndarray, kappa: float) -> np.ndarray:
@@ -100,22 +105,30 @@ def _peaks(p: np.ndarray, kappa: float) -> np.ndarray:
                      and _narrow(p, int(k))], dtype=int)
 
 
-def _driven(freqs: np.ndarray, f_max: float) -> np.ndarray:
-    """Frequencies (sorted) a nonlinearity makes of the input's lines ``freqs``: every Σ a_i·f_i up to ``f_max``
-    over the (at most 4) strongest, a_i integers up to :data:`_ORDER` in size (fewer for more lines) — and every
-    multiple of each line.
+def _driven(strong: np.ndarray, weak: np.ndarray, f_max: float) -> np.ndarray:
+    """Frequencies (sorted) a nonlinearity makes of the input's lines: every Σ a_i·f_i up to ``f_max`` over the
+    (at most 4) ``strong`` lines, a_i integers up to :data:`_ORDER` in size (fewer for more lines), with the (at
+    most 2) ``weak`` ones joining at orders up to :data:`_WEAK_ORDER` — and every multiple of a strong line.
 
     A hysteresis driven by a few sines answers at their harmonics and intermodulation products of high order; by
     frequency alone a disturbance there cannot be told from a model error, so such frequencies are left alone
-    (a sum of several sines covers most of the band: lines are then seldom found — the safe side)."""
-    freqs = np.asarray(freqs, dtype=np.float64)[:4]
+    (a sum of several sines covers most of the band: lines are then seldom found — the safe side). A weak line may
+    be a sine of small amplitude (a Prandtl–Ishlinskii stage driven by three sines, one 26× its side bins, left
+    its products in the residual) or a noise input's bump (a steps or noise input's bins reach 60×): only its low
+    orders are left alone, which a bump's cannot cover the band with."""
+    strong = np.asarray(strong, dtype=np.float64)[:4]
+    weak = np.asarray(weak, dtype=np.float64)[:2]
+    freqs = np.r_[strong, weak]
     if not freqs.size:
         return np.zeros(0)
-    out = [f * np.arange(1, int(f_max / f) + 1) for f in freqs]
+    out = [f * np.arange(1, int(f_max / f) + 1) for f in strong]
+    out += [f * np.arange(1, _WEAK_ORDER + 1) for f in weak]
     if freqs.size > 1:
-        order = min(_ORDER, int((_GRID ** (1.0 / freqs.size) - 1) // 2))
-        r = np.arange(-order, order + 1, dtype=np.float64)
-        grid = np.stack(np.meshgrid(*([r] * freqs.size), indexing="ij"), axis=-1).reshape(-1, freqs.size)
+        w = (2 * _WEAK_ORDER + 1) ** weak.size
+        order = min(_ORDER, int(((_GRID / w) ** (1.0 / max(strong.size, 1)) - 1) // 2)) if strong.size else 0
+        axes = [np.arange(-order, order + 1, dtype=np.float64)] * strong.size + \
+            [np.arange(-_WEAK_ORDER, _WEAK_ORDER + 1, dtype=np.float64)] * weak.size
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, freqs.size)
         out.append(np.abs(grid @ freqs))
     d = np.concatenate(out)
     return np.sort(d[d <= f_max])
@@ -191,20 +204,12 @@ def disturbance_lines(t: np.ndarray, u: np.ndarray, e: np.ndarray, noise: float)
     u_lines = u_lines[u_lines > _CLEAR]
     # the input's strongest lines and what a nonlinearity makes of them
     # (their frequencies refined within the bin: the 50th harmonic of a bin's centre can be 25 bins off), and only
-    # true lines: a low-passed noise input's band passes the level test in places, and the products of such
-    # "lines" cover every frequency (generated stage 6500021: 60 Hz pickup on a noise input, missed).
-    # A line of the input that is not stationary (a triangle's amplitudes changing by thirds, the sines of one half
-    # of a mix) makes products that are not either, which the residual's own stationarity test refuses.
-    top = [k for k in u_lines[np.argsort(pu[u_lines])[::-1]]
+    # true lines (_NARROW_INPUT)
+    top = [int(k) for k in u_lines[np.argsort(pu[u_lines])[::-1]]
            if pu[k] >= pu[max(k - _CLEAR, 0):k + _CLEAR + 1].max() and _narrow(pu, int(k))]
-    strongest = []
-    for k in top:
-        f = _refine(t, u, k * df, df)
-        if _stationary(t, u, f, *_sinusoid(t, u, f)):
-            strongest.append(f)
-        if len(strongest) == 4:
-            break
-    driven = _driven(np.array(strongest), 0.5 / dt)
+    strong = [_refine(t, u, k * df, df) for k in top if _narrow(pu, k, _NARROW_INPUT)][:4]
+    weak = [_refine(t, u, k * df, df) for k in top if not _narrow(pu, k, _NARROW_INPUT)][:2]
+    driven = _driven(np.array(strong), np.array(weak), 0.5 / dt)
     found: list[Line] = []
     refused: list[int] = []          # bins looked at and found not stationary
     for _ in range(3 * MAX_LINES):
