@@ -130,6 +130,10 @@ def run(args: argparse.Namespace) -> int:
     best = d.ladder[-1]
     fm, fth = d.models[best.model]
     y = d.record_fitted(rec.t, rec.y)   # without the lines the input does not drive, where diagnose found some
+    removed = d.disturbances[:d.n_removed]
+    notes = list(rec.meta.get("regularised", [])) + (   # what was done to the record, as hyst fit says it
+        ["taken out of the output before fitting: " + ", ".join(
+            f"{ln.frequency:.4g} Hz ({ln.amplitude * 1e9:.3g} nm amplitude)" for ln in removed)] if removed else [])
     adm = check_admissible(fm, fth, record=(rec.t, rec.u, y))
     rmse_v, rmse_t, constrained = best.rmse, best.rmse_train, None
     if args.admissible:
@@ -171,10 +175,6 @@ def run(args: argparse.Namespace) -> int:
         from ..identify.input_range import identified_range
         from ..diagnose.diagnose import BLOCKS, SPLIT
         # the provenance hyst fit --out writes: the notes on the record, the hold-out, the samples
-        removed = d.disturbances[:d.n_removed]
-        notes = list(rec.meta.get("regularised", [])) + (
-            ["taken out of the output before fitting: " + ", ".join(
-                f"{ln.frequency:.4g} Hz ({ln.amplitude * 1e9:.3g} nm amplitude)" for ln in removed)] if removed else [])
         prov = {"method": "diagnose", "rmse": rmse_v, "rmse_train": rmse_t, "data": str(args.data),
                 "split": f"train on {1 - SPLIT:.0%} of the samples, validate on {SPLIT:.0%} in {BLOCKS} interleaved "
                          "blocks, free-run from rest at the record start",
@@ -188,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         obj = _clean(d.to_json())
         obj["data"] = rec.source
-        obj["data_notes"] = list(rec.meta.get("regularised", []))  # what was done to the record, as hyst fit's
+        obj["data_notes"] = notes
         obj["report"] = report_path
         obj["params_file"] = out_path
         obj["admissibility"] = _clean(adm.to_json())

@@ -190,11 +190,14 @@ def run(args) -> int:
             print(f"hyst fit: {args.method} seed {args.seed} (--seed {args.seed} repeats this fit)", file=sys.stderr)
     res = fit(model, rec.t, rec.u, rec.y, method=args.method, seed=args.seed, split=split,
               progress=not args.quiet, **options)
-    res, y, removed = _without_lines(model, rec, res, split)
+    res, y, lines = _without_lines(model, rec, res, split)
+    removed = _said(lines)
     if removed and not args.quiet:
         print(f"hyst fit: {removed} in the output, which the input does not drive (mains pickup or an amplifier's "
               "ripple?), taken out of the record and the model refitted from its fit (as hyst diagnose does)",
               file=sys.stderr)
+    notes = list(rec.meta.get("regularised", [])) + ([f"taken out of the output before fitting: {removed}"]
+                                                      if removed else [])
     from ..effects.settle import settle_result
     from ..identify.admissible import check_admissible
     res = settle_result(model, res, rec.t, rec.u)  # no stop where the record shows none (effects.settle)
@@ -215,10 +218,9 @@ def run(args) -> int:
         for line in adm.violations + [f"{b}" for b in adm.at_bounds] + ([adm.divergence] if adm.divergence else []):
             print(f"hyst fit: warning: {line}", file=sys.stderr)
     if out is not None:
-        prov = {"method": args.method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": str(args.data),
+        prov = {"method": res.method if lines else args.method, "rmse": res.rmse, "rmse_train": res.rmse_train,
+                "data": str(args.data),
                 "split": res.split, "seconds": round(res.seconds, 3), "samples": len(rec)}
-        notes = list(rec.meta.get("regularised", [])) + ([f"taken out of the output before fitting: {removed}"]
-                                                          if removed else [])
         if notes:
             prov["data_notes"] = "; ".join(notes)
         if args.seed is not None:
@@ -231,12 +233,13 @@ def run(args) -> int:
             prov["admissible"] = provenance(constrained["free_rmse"])
         write_params(out, spec_from_model(model, res.theta, fit=prov, dt=rec.dt), force=args.force)
     if args.json:
-        obj = {"model": args.model, "effects": effects, "method": args.method, "rmse": res.rmse,
+        obj = {"model": args.model, "effects": effects, "method": res.method if lines else args.method,
+               "rmse": res.rmse,
                "rmse_train": res.rmse_train, "seconds": res.seconds, "params": res.params,
                "n_evaluations": res.n_evaluations, "split": res.split, "samples": len(rec), "dt": rec.dt,
                "data": str(args.data), "out": str(out) if out else None,
-               "data_notes": list(rec.meta.get("regularised", [])), "admissibility": adm.to_json(),
-               "lines_removed": removed or None,
+               "data_notes": notes, "admissibility": adm.to_json(),
+               "disturbances": [dict(ln.to_json(), removed=True) for ln in lines],
                "constrained": constrained}
         print(json.dumps(obj))
     else:
@@ -247,27 +250,35 @@ def run(args) -> int:
 def _without_lines(model, rec: Record, res, split):
     """The fit on the record without the lines its residual shows that the input does not drive (mains pickup:
     :mod:`hyst_model.diagnose.lines`, found and taken out as ``hyst diagnose`` does, then refitted from ``res`` by
-    its least squares); ``(res, y, said)`` — ``res``, the record's own output and ``""`` when there are none."""
+    its least squares); ``(res, y, lines)`` — ``res``, the record's own output and ``[]`` when there are none."""
     from dataclasses import replace
 
     from ..diagnose.lines import disturbance_lines, without_lines
-    from ..effects.signals import fmt_len, noise_floor
+    from ..effects.signals import noise_floor
     from ..identify import fit
     with np.errstate(all="ignore"):
         e = rec.y - np.asarray(model.simulate(res.theta, rec.t, rec.u), dtype=np.float64)
     if not np.all(np.isfinite(e)):
-        return res, rec.y, ""
+        return res, rec.y, []
     white = min(noise_floor(rec.y), noise_floor(e)) if noise_floor(e) > 0 else noise_floor(rec.y)
     lines = disturbance_lines(rec.t, rec.u, e, white)
     if not lines:
-        return res, rec.y, ""
+        return res, rec.y, []
     y = without_lines(rec.t, rec.y, lines)
     refit = fit(model, rec.t, rec.u, y, method="fast", split=split, theta0=res.theta, max_nfev=80)
     # the fit is the user's method's, finished on the cleaned record: its name, time and work add up
     refit = replace(refit, method=f"{res.method} (refitted without the lines)",
                     seconds=res.seconds + refit.seconds, n_evaluations=res.n_evaluations + refit.n_evaluations)
+    return refit, y, lines
+
+
+def _said(lines) -> str:
+    """The lines in words ("" for none)."""
+    from ..effects.signals import fmt_len
+    if not lines:
+        return ""
     said = ", ".join(f"{ln.frequency:.4g} Hz ({fmt_len(ln.amplitude)} amplitude)" for ln in lines)
-    return refit, y, ("a line at " if len(lines) == 1 else "lines at ") + said
+    return ("a line at " if len(lines) == 1 else "lines at ") + said
 
 
 def _check_options(args) -> None:

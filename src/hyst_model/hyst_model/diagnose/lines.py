@@ -207,8 +207,9 @@ def disturbance_lines(t: np.ndarray, u: np.ndarray, e: np.ndarray, noise: float)
     # true lines (_NARROW_INPUT)
     top = [int(k) for k in u_lines[np.argsort(pu[u_lines])[::-1]]
            if pu[k] >= pu[max(k - _CLEAR, 0):k + _CLEAR + 1].max() and _narrow(pu, int(k))]
-    strong = [_refine(t, u, k * df, df) for k in top if _narrow(pu, k, _NARROW_INPUT)][:4]
-    weak = [_refine(t, u, k * df, df) for k in top if not _narrow(pu, k, _NARROW_INPUT)][:2]
+    # chosen first, refined then: a periodic input has hundreds of harmonics, each refinement some 16 fits
+    strong = [_refine(t, u, k * df, df) for k in [k for k in top if _narrow(pu, k, _NARROW_INPUT)][:4]]
+    weak = [_refine(t, u, k * df, df) for k in [k for k in top if not _narrow(pu, k, _NARROW_INPUT)][:2]]
     driven = _driven(np.array(strong), np.array(weak), 0.5 / dt)
     found: list[Line] = []
     refused: list[int] = []          # bins looked at and found not stationary
