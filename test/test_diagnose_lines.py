@@ -76,7 +76,7 @@ def test_slow_trend_is_not_a_line():
 
 
 def test_line_json_in_si():
-    ln = Line(50.0, 3e-9, 3e-9 / np.sqrt(2), 1e4)
+    ln = Line(50.0, 3e-9, 1e4)
     assert ln.to_json() == {"frequency": 50.0, "amplitude": 3e-9, "rms": 3e-9 / np.sqrt(2), "ratio": 1e4, "phase": 0.0}
     assert ln.signal(np.array([0.0, 0.01]))[0] == pytest.approx(3e-9)
 

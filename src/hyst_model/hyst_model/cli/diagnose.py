@@ -130,10 +130,9 @@ def run(args: argparse.Namespace) -> int:
     best = d.ladder[-1]
     fm, fth = d.models[best.model]
     y = d.record_fitted(rec.t, rec.y)   # without the lines the input does not drive, where diagnose found some
-    removed = d.disturbances[:d.n_removed]
-    notes = list(rec.meta.get("regularised", [])) + (   # what was done to the record, as hyst fit says it
-        ["taken out of the output before fitting: " + ", ".join(
-            f"{ln.frequency:.4g} Hz ({ln.amplitude * 1e9:.3g} nm amplitude)" for ln in removed)] if removed else [])
+    from ..diagnose.lines import removal_note
+    # what was done to the record, as hyst fit says it
+    notes = list(rec.meta.get("regularised", [])) + removal_note(d.disturbances[:d.n_removed])
     adm = check_admissible(fm, fth, record=(rec.t, rec.u, y))
     rmse_v, rmse_t, constrained = best.rmse, best.rmse_train, None
     if args.admissible:

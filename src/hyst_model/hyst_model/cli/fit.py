@@ -190,14 +190,14 @@ def run(args) -> int:
             print(f"hyst fit: {args.method} seed {args.seed} (--seed {args.seed} repeats this fit)", file=sys.stderr)
     res = fit(model, rec.t, rec.u, rec.y, method=args.method, seed=args.seed, split=split,
               progress=not args.quiet, **options)
+    from ..diagnose.lines import removal_note, said
     res, y, lines = _without_lines(model, rec, res, split)
-    removed = _said(lines)
-    if removed and not args.quiet:
-        print(f"hyst fit: {removed} in the output, which the input does not drive (mains pickup or an amplifier's "
-              "ripple?), taken out of the record and the model refitted from its fit (as hyst diagnose does)",
-              file=sys.stderr)
-    notes = list(rec.meta.get("regularised", [])) + ([f"taken out of the output before fitting: {removed}"]
-                                                      if removed else [])
+    if lines and not args.quiet:
+        print(f"hyst fit: {said(lines)} in the output, which the input does not drive (mains pickup or an "
+              "amplifier's ripple?), taken out of the record and the model refitted from its fit (as hyst diagnose "
+              "does)", file=sys.stderr)
+    notes = list(rec.meta.get("regularised", [])) + removal_note(lines)
+    method = res.method if lines else args.method   # the refit's name says it was finished without the lines
     from ..effects.settle import settle_result
     from ..identify.admissible import check_admissible
     res = settle_result(model, res, rec.t, rec.u)  # no stop where the record shows none (effects.settle)
@@ -218,8 +218,7 @@ def run(args) -> int:
         for line in adm.violations + [f"{b}" for b in adm.at_bounds] + ([adm.divergence] if adm.divergence else []):
             print(f"hyst fit: warning: {line}", file=sys.stderr)
     if out is not None:
-        prov = {"method": res.method if lines else args.method, "rmse": res.rmse, "rmse_train": res.rmse_train,
-                "data": str(args.data),
+        prov = {"method": method, "rmse": res.rmse, "rmse_train": res.rmse_train, "data": str(args.data),
                 "split": res.split, "seconds": round(res.seconds, 3), "samples": len(rec)}
         if notes:
             prov["data_notes"] = "; ".join(notes)
@@ -233,8 +232,7 @@ def run(args) -> int:
             prov["admissible"] = provenance(constrained["free_rmse"])
         write_params(out, spec_from_model(model, res.theta, fit=prov, dt=rec.dt), force=args.force)
     if args.json:
-        obj = {"model": args.model, "effects": effects, "method": res.method if lines else args.method,
-               "rmse": res.rmse,
+        obj = {"model": args.model, "effects": effects, "method": method, "rmse": res.rmse,
                "rmse_train": res.rmse_train, "seconds": res.seconds, "params": res.params,
                "n_evaluations": res.n_evaluations, "split": res.split, "samples": len(rec), "dt": rec.dt,
                "data": str(args.data), "out": str(out) if out else None,
@@ -254,14 +252,13 @@ def _without_lines(model, rec: Record, res, split):
     from dataclasses import replace
 
     from ..diagnose.lines import disturbance_lines, without_lines
-    from ..effects.signals import noise_floor
+    from ..effects.signals import record_floor
     from ..identify import fit
     with np.errstate(all="ignore"):
         e = rec.y - np.asarray(model.simulate(res.theta, rec.t, rec.u), dtype=np.float64)
     if not np.all(np.isfinite(e)):
         return res, rec.y, []
-    white = min(noise_floor(rec.y), noise_floor(e)) if noise_floor(e) > 0 else noise_floor(rec.y)
-    lines = disturbance_lines(rec.t, rec.u, e, white)
+    lines = disturbance_lines(rec.t, rec.u, e, record_floor(rec.y, e))
     if not lines:
         return res, rec.y, []
     y = without_lines(rec.t, rec.y, lines)
@@ -270,15 +267,6 @@ def _without_lines(model, rec: Record, res, split):
     refit = replace(refit, method=f"{res.method} (refitted without the lines)",
                     seconds=res.seconds + refit.seconds, n_evaluations=res.n_evaluations + refit.n_evaluations)
     return refit, y, lines
-
-
-def _said(lines) -> str:
-    """The lines in words ("" for none)."""
-    from ..effects.signals import fmt_len
-    if not lines:
-        return ""
-    said = ", ".join(f"{ln.frequency:.4g} Hz ({fmt_len(ln.amplitude)} amplitude)" for ln in lines)
-    return ("a line at " if len(lines) == 1 else "lines at ") + said
 
 
 def _check_options(args) -> None:

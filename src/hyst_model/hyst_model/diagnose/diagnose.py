@@ -47,7 +47,7 @@ from hyst_common.blas import one_blas_thread
 
 from ..effects import effects_data_config
 from ..effects.settle import settle
-from ..effects.signals import noise_floor, sample_time, fmt_len
+from ..effects.signals import record_floor, sample_time, fmt_len
 from ..errors import DataError, FitError
 from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scales, _simulate, candidate_names,
                     default_fitter, guarded_refit, refit, rmse, validation_mask)
@@ -57,7 +57,7 @@ from .prune import prune
 from .reconfig import reconfigure
 from .swap import swap
 from .jointly import joint_pair
-from .lines import Line, disturbance_lines, floor_with_lines, without_lines
+from .lines import Line, disturbance_lines, floor_with_lines, said as lines_said, without_lines
 from .ladder import climb
 from .setup import Candidate, Rung, Setup
 from .stages import refit_all, screen_all
@@ -209,12 +209,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     say(f"fitting base model {base} on {n} samples ({train.sum()} train, {val.sum()} validation)")
     th_base = fit_(base_model, t, u, y, None)
     e_base = y - _simulate(base_model, th_base, t, u)
-    # The second differences of y carry signal wherever the record moves fast (sweeps, sines near 100 Hz: the
-    # noise came out 1.6x too high on generated sweeps, 9x on one sine record), which hides small effects
-    # "at the noise floor"; the base model's residual has that signal removed. Neither can underestimate white
-    # sensor noise, so the smaller is kept.
-    noise = noise_floor(y)
-    noise = min(noise, noise_floor(e_base)) if noise_floor(e_base) > 0 else noise
+    noise = record_floor(y, e_base)
     # A line in the output the input does not drive (mains pickup, .lines) is the sensor's, not the stage's: it is
     # taken out of the record before any model sees it, and the base refitted from where it ended — a mode left
     # to it rings at the line and is named (generated stages without an effect: dynamics on 4 of 12 with pickup).
@@ -226,8 +221,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         y = without_lines(t, y, removed)
         th_base = fit_(base_model, t, u, y, th_base)
         e_base = y - _simulate(base_model, th_base, t, u)
-        say(f"took {_said(removed)} out of the output: the input does not drive {'it' if len(removed) == 1 else 'them'}"
-            " (mains pickup or an amplifier's ripple?)", step=False)
+        say(f"took {lines_said(removed)} out of the output: the input does not drive "
+            f"{'it' if len(removed) == 1 else 'them'} (mains pickup or an amplifier's ripple?)", step=False)
     s = Setup(t, u, y, val, dt, cfg, fixed, base, base_model, names, fit_, say, noise, th_base, e_base,
               min_factor, t_min, noise_margin, full_rate_top, max_rungs,
               default_jobs() if jobs is None else max(1, int(jobs)))
@@ -250,7 +245,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         if floor_with_lines(white, more) > noise:
             lines, noise = more, floor_with_lines(white, more)
             s.noise = noise
-            say(f"noise floor {fmt_len(noise)}: white {fmt_len(white)} and {_said(lines)} in the final model's "
+            say(f"noise floor {fmt_len(noise)}: white {fmt_len(white)} and {lines_said(lines)} in the final model's "
                 "residual", step=False)
     ranked, missing, unexplained, expl = verdict(s, cands, ladder, models, chosen, unexplained_factor,
                                                  _explain)           # 4. the answer in words
@@ -269,23 +264,18 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     if und:
         expl = f"{expl}; {sentence(und, noise, dt, (float(np.min(u)), float(np.max(u))))}"
     if removed:
-        expl = (f"{expl}; {_said(removed)} in the output, which the input does not drive (mains pickup or an "
+        expl = (f"{expl}; {lines_said(removed)} in the output, which the input does not drive (mains pickup or an "
                 "amplifier's ripple?), {} taken out of the record before fitting: every RMSE here is of the record "
                 "without {}".format(*(("was", "it") if len(removed) == 1 else ("were", "them"))))
     if lines:
         expl = (f"{expl}; the noise floor {fmt_len(noise)} holds white sensor noise ({fmt_len(white)}) and "
-                f"{_said(lines)} that the input does not drive (mains pickup or an amplifier's ripple?): no "
+                f"{lines_said(lines)} that the input does not drive (mains pickup or an amplifier's ripple?): no "
                 "model of the stage removes them — filter or shield the sensor to go below")
     # what the user is handed: no stop where the record shows none (the same output on the record: .settle)
     models = {k: (m, settle(m, th, t, u)) for k, (m, th) in models.items()}
     return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
                      time.perf_counter() - t0, models, unexplained, caution, und, white, removed + lines,
                      len(removed))
-
-
-def _said(lines: list[Line]) -> str:
-    parts = [f"{ln.frequency:.4g} Hz ({fmt_len(ln.amplitude)} amplitude)" for ln in lines]
-    return ("a line at " if len(lines) == 1 else "lines at ") + ", ".join(parts)
 
 
 def _explain(c: Candidate, base: str, base_val: float) -> str:

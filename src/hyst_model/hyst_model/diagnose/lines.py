@@ -29,8 +29,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.ndimage import median_filter
 
-__all__ = ["Line", "disturbance_lines", "floor_with_lines", "without_lines", "FALSE_ALARM", "MIN_SHARE",
-           "MAX_LINES"]
+__all__ = ["Line", "disturbance_lines", "floor_with_lines", "without_lines", "said", "removal_note", "FALSE_ALARM",
+           "MIN_SHARE", "MAX_LINES"]
 
 #: Chance that white or smoothly coloured noise alone shows a line anywhere in one record.
 FALSE_ALARM = 1e-3
@@ -66,16 +66,20 @@ class Line:
 
     frequency: float     # Hz
     amplitude: float     # m, peak
-    rms: float           # m (amplitude / √2)
     ratio: float         # its periodogram bin over the local spectral level
     phase: float = 0.0   # rad: the line is amplitude·cos(2π·frequency·t + phase) on the record's own time t
+
+    @property
+    def rms(self) -> float:
+        """m (amplitude / √2)."""
+        return self.amplitude / float(np.sqrt(2.0))
 
     def signal(self, t: np.ndarray) -> np.ndarray:
         """The line on the times ``t`` (s) of the record it was found in (m)."""
         return self.amplitude * np.cos(2.0 * np.pi * self.frequency * np.asarray(t, dtype=np.float64) + self.phase)
 
     def to_json(self) -> dict:
-        return asdict(self)
+        return dict(asdict(self), rms=self.rms)
 
 
 def _spectrum(x: np.ndarray) -> np.ndarray:
@@ -232,7 +236,7 @@ def disturbance_lines(t: np.ndarray, u: np.ndarray, e: np.ndarray, noise: float)
         if not _stationary(t, x, f, amp, phase):
             refused.append(k)
             continue
-        found.append(Line(float(f), amp, amp / float(np.sqrt(2.0)), float(p[k] / level[k]), phase))
+        found.append(Line(float(f), amp, float(p[k] / level[k]), phase))
         x = x - found[-1].signal(t)
     return found
 
@@ -247,3 +251,17 @@ def without_lines(t: np.ndarray, y: np.ndarray, lines: list[Line]) -> np.ndarray
     if not lines:
         return y
     return np.asarray(y, dtype=np.float64) - sum(ln.signal(t) for ln in lines)
+
+
+def said(lines: list[Line]) -> str:
+    """The lines in words: "a line at 49.96 Hz (5.51 nm amplitude)" ("" for none)."""
+    if not lines:
+        return ""
+    from ..effects.signals import fmt_len
+    parts = ", ".join(f"{ln.frequency:.4g} Hz ({fmt_len(ln.amplitude)} amplitude)" for ln in lines)
+    return ("a line at " if len(lines) == 1 else "lines at ") + parts
+
+
+def removal_note(lines: list[Line]) -> list[str]:
+    """The data note ``hyst fit`` and ``hyst diagnose`` give for the lines they took out ([] for none)."""
+    return [f"taken out of the output before fitting: {said(lines)}"] if lines else []
