@@ -47,6 +47,24 @@ def test_report_contains_plots_tables_and_escaped_text(tmp_path):
     assert html.count("<td>mbw+creep</td>") == 1
     assert len(re.findall(r"<td>sine 1 Hz</td>", html)) == 1
     assert (d / MARKER).exists()
+    assert "Taken out of the record" not in html                       # no line was
+
+
+@pytest.mark.slow
+def test_report_says_which_lines_its_rmses_are_without(tmp_path):
+    """The ladder's RMSEs are of the record without the lines diagnose took out, the plots of the record as
+    measured: the report says so, naming the lines taken out (not one found only in the final residual)."""
+    rec, yhat = _record()
+    st = compare_stats(rec.t, rec.u, rec.y, yhat)
+    diagnosis = {"baseline": {"model": "mbw", "rmse": 3e-7}, "missing": "none", "candidates": [],
+                 "disturbances": [
+                     {"frequency": 59.96, "amplitude": 8.03e-9, "ratio": 900.0, "phase": 0.1, "rms": 5.7e-9,
+                      "removed": True},
+                     {"frequency": 179.9, "amplitude": 2e-9, "ratio": 90.0, "phase": 0.0, "rms": 1.4e-9,
+                      "removed": False}]}
+    html = (write_report(tmp_path / "r", rec, yhat, st, diagnosis=diagnosis) / "index.html").read_text()
+    assert "Taken out of the record before fitting: a line at 59.96 Hz (8.03 nm amplitude)" in html
+    assert "179.9" not in html and "record as measured" in html
 
 
 @pytest.mark.slow

@@ -214,6 +214,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     # taken out of the record before any model sees it, and the base refitted from where it ended — a mode left
     # to it rings at the line and is named (generated stages without an effect: dynamics on 4 of 12 with pickup).
     # One the base's larger error hid is looked for again in the final model's residual and counted in the floor.
+    # The scales and each effect's data configuration stay those of the record as measured, as in hyst fit (one
+    # path: both write the same model); a line moves a range or a centre by its amplitude, nanometres on microns.
     white = noise
     removed = disturbance_lines(t, u, e_base, white)
     lines: list[Line] = []

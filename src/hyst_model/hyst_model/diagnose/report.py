@@ -315,6 +315,14 @@ def write_report(dir: str | os.PathLike, record, model_output: np.ndarray, stats
     return target
 
 
+def _lines_taken(diagnosis: Mapping[str, Any]) -> str:
+    """The lines a diagnosis took out of the record, in words ("" for none)."""
+    from .lines import Line, said
+    keys = ("frequency", "amplitude", "ratio", "phase")
+    return said([Line(**{k: float(ln[k]) for k in keys}) for ln in diagnosis.get("disturbances", []) or []
+                 if ln.get("removed")])
+
+
 def _write_into(d: Path, t, u, y, yhat, record, stats, ladder, diagnosis, title) -> None:
     """The plots and index.html of :func:`write_report`, into directory ``d``."""
     figs = _plots(d, t, u, y, yhat, stats, ladder)
@@ -331,6 +339,12 @@ def _write_into(d: Path, t, u, y, yhat, record, stats, ladder, diagnosis, title)
         rows = [(c.get("effect"), _nm(float(c.get("rmse", np.nan))), c.get("improvement"), c.get("evidence", ""))
                 for c in diagnosis.get("candidates", [])]
         parts.append(_table(["effect", "validation RMSE (nm)", "improvement", "evidence"], rows))
+        taken = _lines_taken(diagnosis)
+        if taken:
+            parts.append(f"<p>Taken out of the record before fitting: {html.escape(taken)}, which the input does "
+                         "not drive (mains pickup or an amplifier's ripple?). Every RMSE of the diagnosis and the "
+                         "ladder is of the record without them; the fit figures and plots below are of the record as "
+                         "measured (the lines show there).</p>")
     if ladder:
         rungs = [(r.get("model"), _nm(float(r.get("rmse", np.nan))),
                   _nm(float(r["rmse_train"])) if r.get("rmse_train") is not None else "") for r in ladder]
