@@ -18,7 +18,7 @@ import math
 import os
 import sys
 
-from hyst_common.argtypes import positive_int
+from hyst_common.argtypes import positive_float, positive_int
 
 __all__ = ["register", "run"]
 
@@ -47,6 +47,10 @@ def register(subparsers) -> None:
     p.add_argument("--force", action="store_true", help="allow --report/--out to replace existing output")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--quiet", action="store_true", help="no progress display on stderr")
+    p.add_argument("--sensor-noise", type=positive_float, default=None, metavar="M",
+                   help="the sensor's noise RMS in metres, e.g. 3e-9 (from a record of the stage at rest): the "
+                        "noise floor where it is more than the record shows — noise that is not white, on a record "
+                        "without holds (steps with holds show it themselves)")
     p.add_argument("--jobs", type=positive_int, default=None, metavar="N",
                    help="threads fitting the candidates side by side (default: the processors, at most 6; "
                         "the result does not depend on it)")
@@ -123,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     user_cfg = parse_config(args.config, names or sorted(EFFECTS))
     rec = load_checked(args)
     d = diagnose(rec.t, rec.u, rec.y, base=args.base, effects=names, progress=not args.quiet, config=user_cfg,
-                 jobs=args.jobs)
+                 jobs=args.jobs, sensor_noise=args.sensor_noise)
     # The model diagnose hands on is checked as hyst fit checks its fit (one path): Remark 4.1 and parameters on
     # their bounds, in the text, the JSON and the params file's provenance.
     from ..identify.admissible import check_admissible

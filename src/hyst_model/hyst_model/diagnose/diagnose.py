@@ -8,7 +8,8 @@ The engine (:func:`diagnose`)
    their parameters only ever see the training samples, so a free parameter earns nothing unless it predicts
    held-out data — and the validation RMSE at each ladder rung is the number ``hyst fit --effects`` reports;
 2. estimates the sensor noise floor from the measured output (second differences, robust) with any line the
-   input does not drive (mains pickup, :mod:`.lines`) — the best any model can do;
+   input does not drive (mains pickup, :mod:`.lines`), or the noise read where the input is held still when that
+   is larger (noise that is not white, :mod:`.colour`) — the best any model can do;
 3. fits the base model (``mbw`` or ``bw``) with :func:`hyst_model.identify.fit`;
 4. for every candidate effect computes its residual signature (a score and a sentence of evidence) and screens
    it: the effect's few parameters (and the offset) fitted from its data-driven start on top of the base model
@@ -57,6 +58,7 @@ from .prune import prune
 from .reconfig import reconfigure
 from .swap import swap
 from .jointly import joint_pair
+from .colour import MARGIN as HOLD_MARGIN, hold_noise
 from .lines import Line, disturbance_lines, floor_with_lines, said as lines_said, without_lines
 from .ladder import climb
 from .setup import Candidate, Rung, Setup
@@ -95,6 +97,10 @@ class Diagnosis:
     #: The first this many disturbances were taken out of the record before fitting (:meth:`record_fitted`); the
     #: rest, found only in the final model's residual, are counted in ``noise``.
     n_removed: int = 0
+    #: The sensor noise read in the record's holds (.colour), where it is the floor: larger than the white part.
+    noise_holds: float | None = None
+    #: The sensor noise the user gave (``sensor_noise``), where it is the floor: more than the record shows.
+    noise_given: float | None = None
 
     def record_fitted(self, t: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The output the models were fitted to: ``y`` without the lines taken out (``y`` when none were)."""
@@ -106,6 +112,8 @@ class Diagnosis:
             "noise_floor": self.noise,
             "noise_floor_white": self.noise if self.noise_white is None else self.noise_white,
             "disturbances": [dict(ln.to_json(), removed=i < self.n_removed) for i, ln in enumerate(self.disturbances)],
+            "noise_floor_holds": self.noise_holds,
+            "noise_floor_given": self.noise_given,
             "candidates": [{"effect": c.effect, "rmse": c.rmse, "improvement": c.improvement,
                             "significant": c.significant, "score": c.score, "t_stat": c.t_stat,
                             "rmse_without": c.rmse_without,
@@ -129,7 +137,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
              min_factor: float = 1.1, t_min: float = 3.0, noise_margin: float = 1.1,
              unexplained_factor: float = UNEXPLAINED_FACTOR,
              full_rate_top: int = 6, max_rungs: int = 3, progress: bool | Callable = False,
-             config: dict | None = None, jobs: int | None = None) -> Diagnosis:
+             config: dict | None = None, jobs: int | None = None, sensor_noise: float | None = None) -> Diagnosis:
     """Fit ``base``, test each effect by its residual signature and a validated refit, name the missing one.
 
     Parameters
@@ -171,6 +179,11 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     jobs : int, optional
         Threads fitting the candidates side by side (default: the processors available, at most 6). The result
         does not depend on it (:mod:`hyst_model.diagnose.parallel`).
+    sensor_noise : float, optional
+        The sensor's noise RMS (m) where the user knows it — from a record of the stage at rest, or the sensor's
+        data sheet at the bandwidth recorded —, for noise that is not white on a record without holds (sines,
+        sweeps, noise), where the record itself shows only the white part. The floor is the larger of it and
+        what the record shows (the record cannot show less noise than there is).
 
     Raises
     ------
@@ -187,6 +200,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         raise DataError(f"t, u, y have different lengths ({t.size}, {u.size}, {y.size})")
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
         raise DataError("the record contains non-finite values")
+    if sensor_noise is not None and not (math.isfinite(sensor_noise) and sensor_noise > 0):
+        raise DataError(f"the sensor noise must be an RMS > 0 in metres, not {sensor_noise!r}")
     n = t.size
     need = int(math.ceil(max(MIN_TRAIN / (1 - SPLIT), MIN_VALID / SPLIT)))
     if n < need:
@@ -225,6 +240,21 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         e_base = y - _simulate(base_model, th_base, t, u)
         say(f"took {lines_said(removed)} out of the output: the input does not drive "
             f"{'it' if len(removed) == 1 else 'them'} (mains pickup or an amplifier's ripple?)", step=False)
+    # Noise that is not white (a sensor slower than the sampling) is read where the input is held still (.colour);
+    # after the lines are out, which would count twice.
+    held = hold_noise(t, u, y)
+    if held is not None and held.rms > HOLD_MARGIN * white:
+        noise = held.rms
+        say(f"noise floor {fmt_len(noise)} from the record's {held.holds} holds: the sensor noise is not white "
+            f"({noise / white:.2g}× its white part)", step=False)
+    else:
+        held = None
+    given = None
+    if sensor_noise is not None and sensor_noise > noise:
+        noise, held, given = float(sensor_noise), None, float(sensor_noise)
+    elif sensor_noise is not None:
+        say(f"the record shows more noise ({fmt_len(noise)}) than the sensor noise given "
+            f"({fmt_len(sensor_noise)}): the record's is the floor", step=False)
     s = Setup(t, u, y, val, dt, cfg, fixed, base, base_model, names, fit_, say, noise, th_base, e_base,
               min_factor, t_min, noise_margin, full_rate_top, max_rungs,
               default_jobs() if jobs is None else max(1, int(jobs)))
@@ -269,6 +299,17 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         expl = (f"{expl}; {lines_said(removed)} in the output, which the input does not drive (mains pickup or an "
                 "amplifier's ripple?), {} taken out of the record before fitting: every RMSE here is of the record "
                 "without {}".format(*(("was", "it") if len(removed) == 1 else ("were", "them"))))
+    if given is not None and not lines:
+        expl = (f"{expl}; the noise floor {fmt_len(noise)} is the sensor noise given, {noise / white:.2g}× the "
+                f"white part this record shows ({fmt_len(white)})")
+    elif sensor_noise is not None and not lines:
+        expl = (f"{expl}; the noise floor {fmt_len(noise)} is what the record shows, more than the sensor noise "
+                f"given ({fmt_len(sensor_noise)})")
+    if held is not None and not lines:
+        expl = (f"{expl}; the noise floor {fmt_len(noise)} is the sensor noise read in the record's {held.holds} "
+                f"holds (the input still), {noise / white:.2g}× its white part ({fmt_len(white)}): the sensor's "
+                "noise is not white (electronics slower than the sampling, or the bench vibrating?) and no model "
+                "of the stage removes it")
     if lines:
         expl = (f"{expl}; the noise floor {fmt_len(noise)} holds white sensor noise ({fmt_len(white)}) and "
                 f"{lines_said(lines)} that the input does not drive (mains pickup or an amplifier's ripple?): no "
@@ -277,7 +318,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     models = {k: (m, settle(m, th, t, u)) for k, (m, th) in models.items()}
     return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
                      time.perf_counter() - t0, models, unexplained, caution, und, white, removed + lines,
-                     len(removed))
+                     len(removed), held.rms if held is not None and not lines else None,
+                     given if not lines else None)
 
 
 def _explain(c: Candidate, base: str, base_val: float) -> str:
