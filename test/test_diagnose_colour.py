@@ -129,3 +129,20 @@ def test_sensor_noise_option_refuses_what_is_not_an_rms(tmp_path):
     from hyst_model.errors import DataError
     with pytest.raises(DataError, match="sensor noise"):
         diagnose(T, np.sin(T), np.sin(T), sensor_noise=-1.0)
+
+
+def test_compare_reads_the_noise_in_the_holds():
+    """``hyst compare``'s findings: the exact model of a stage whose sensor adds low-passed noise is at the noise
+    level read in the holds (1.9× the white part here), not "2× the output noise"; with white noise nothing is said."""
+    from hyst_model.diagnose.report import findings
+    from hyst_model.diagnose.stats import compare_stats
+    rng = np.random.default_rng(8)
+    u = _steps(rng)
+    truth = _stage(u)
+    y = truth + SIGMA * rng.standard_normal(N) + _coloured(rng, 40.0, 2.0 * SIGMA)
+    st = compare_stats(T, u, y, truth)
+    said = " ".join(findings(st))
+    assert st.to_dict()["noise_holds"] > MARGIN * st.noise_sigma
+    assert "held still" in said and "at the sensor noise level" in said
+    white = compare_stats(T, u, truth + SIGMA * rng.standard_normal(N), truth)
+    assert white.to_dict()["noise_holds"] is None and "held still" not in " ".join(findings(white))

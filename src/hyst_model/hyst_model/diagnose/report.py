@@ -47,7 +47,12 @@ def findings(st) -> list[str]:
     look at first); ``hyst compare`` prints them and the report lists them."""
     out: list[str] = []
     o = st.overall
-    noise = st.noise_sigma
+    held = st.extra.get("noise_holds")
+    noise = held if held else st.noise_sigma      # noise that is not white, where the holds show it
+    if held:
+        out.append(f"The sensor noise read where the input is held still is {_um(held)}, "
+                   f"{held / st.noise_sigma:.1f}× its white part ({_um(st.noise_sigma)}): the noise is not white "
+                   "(a sensor slower than the sampling, or the bench vibrating?); no model removes it.")
     if noise > 0 and o.rmse < 1.25 * noise:
         out.append(f"The residual ({_um(o.rmse)} RMS) is at the sensor noise level ({_um(noise)}): "
                    "nothing left to explain.")

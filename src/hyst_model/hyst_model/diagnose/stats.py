@@ -42,6 +42,7 @@ import numpy as np
 
 from .correlation import Correlation, auto_lag_step, autocorr, crosscorr, higher_order_tests, z_value
 from .figures import Fit, _as_1d, fit_figures, noise_sigma
+from .colour import MARGIN as HOLD_MARGIN, hold_noise
 from .lines import disturbance_lines
 from .segments import Segment, SegmentFit, fit_by_segment, segment_input
 from .spectra import harmonics, ringing, spectral_peaks
@@ -222,7 +223,15 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
         higher=higher_order_tests(e, u, max_lag, step, conf, dt), lag_step=step,
         extra={"loop_orientation": loop_orientation(u, y), "harmonics": _harmonic_summary(t, u, e),
                "ringing": _ringing_summary(t, u, e, noise_sigma(y)), "peaks": _peak_summary(t, u, e, fs),
-               "disturbances": [ln.to_json() for ln in disturbance_lines(t, u, e, noise_sigma(y))]})
+               "disturbances": [ln.to_json() for ln in disturbance_lines(t, u, e, noise_sigma(y))],
+               "noise_holds": _held(t, u, y, noise_sigma(y))})
+
+
+def _held(t: np.ndarray, u: np.ndarray, y: np.ndarray, white: float) -> float | None:
+    """The output noise read in the record's holds (:mod:`.colour`) where it exceeds the white ``noise_sigma`` by
+    its margin (noise that is not white; diagnose's floor), else None."""
+    h = hold_noise(t, u, y)
+    return h.rms if h is not None and h.rms > HOLD_MARGIN * white else None
 
 
 def _peak_summary(t: np.ndarray, u: np.ndarray, e: np.ndarray, fs: float) -> list[dict[str, float]]:
