@@ -146,3 +146,25 @@ def test_compare_reads_the_noise_in_the_holds():
     assert "held still" in said and "at the sensor noise level" in said
     white = compare_stats(T, u, truth + SIGMA * rng.standard_normal(N), truth)
     assert white.to_dict()["noise_holds"] is None and "held still" not in " ".join(findings(white))
+
+
+def test_the_identification_schedule_holds_long_enough_to_read_the_noise():
+    """``hyst excite``'s default schedule on the simulated PEA stage: its 0.25 s step holds are read; with the sensor's
+    noise low-passed at 40 Hz the holds show it (0.8–1.1× the whole noise; the white part alone
+    beneath the margin), without it they read the sensor's white noise."""
+    from hyst_control.excitation import ExcitationSpec, build_excitation
+    from hyst_sim.plant import Plant, PlantConfig
+    ex = build_excitation(ExcitationSpec())
+    plant = Plant(PlantConfig.for_profile("pea", rate=1.0 / ExcitationSpec().dt, seed=3))
+    plant.reset()
+    r = plant.run(np.asarray(ex.u))
+    t = np.asarray(ex.t)
+    h = hold_noise(t, r.u_applied, r.y)
+    sensor = float(np.hypot(2e-9, 2e-9 / np.sqrt(12.0)))   # the profile's 2 nm noise and 2 nm quantisation
+    assert h is not None and h.holds >= 8 and 0.85 * sensor < h.rms < 1.1 * sensor
+    rng = np.random.default_rng(1)
+    c = np.exp(-2 * np.pi * 40.0 / 2000.0)
+    extra = 3e-9 * lfilter([np.sqrt(1 - c * c)], [1.0, -c], rng.standard_normal(t.size))
+    hc = hold_noise(t, r.u_applied, r.y + extra)
+    total = float(np.sqrt(h.rms ** 2 + np.mean(extra ** 2)))
+    assert hc is not None and 0.8 * total < hc.rms < 1.1 * total and hc.rms > MARGIN * h.rms

@@ -24,8 +24,9 @@ import numpy as np
 
 __all__ = ["HeldNoise", "hold_noise", "still_spans", "MIN_HOLD_S", "MIN_HOLDS", "QUANTILE", "MARGIN"]
 
-#: Holds shorter than this (s) are not read: their second half would be within a step's transient.
-MIN_HOLD_S = 0.3
+#: Holds shorter than this (s) are not read: their second half would be within a step's transient (``hyst excite``
+#: holds its steps 0.25 s).
+MIN_HOLD_S = 0.2
 #: At least this many holds (a quantile of fewer says little).
 MIN_HOLDS = 4
 #: The quantile of the holds' noise variances taken (low: a hold where the stage still moves only raises its own).
