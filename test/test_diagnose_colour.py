@@ -105,9 +105,10 @@ def test_sensor_noise_given_for_a_record_without_holds():
     c, total = _coloured_case(6600189)
     assert hold_noise(c.t, c.u, c.y) is None
     d0 = diagnose(c.t, c.u, c.y)
-    assert d0.missing == "unexplained"
+    assert d0.missing == "unexplained" and "this remainder may be noise" in d0.explanation   # and how to say so:
+    assert "--sensor-noise" in d0.explanation
     d = diagnose(c.t, c.u, c.y, sensor_noise=total)
-    assert d.missing == "none" and d.noise == d.noise_given == total
+    assert d.missing == "none" and d.noise == d.noise_given == total and "may be noise" not in d.explanation
     assert "sensor noise given" in d.explanation and d.to_json()["noise_floor_given"] == total
     low = diagnose(c.t, c.u, c.y, sensor_noise=0.5 * d0.noise_white)
     assert low.noise == d0.noise and low.noise_given is None and low.missing == "unexplained"

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["HeldNoise", "hold_noise", "still_spans", "MIN_HOLD_S", "MIN_HOLDS", "QUANTILE", "MARGIN"]
+__all__ = ["HeldNoise", "hold_noise", "still_spans", "MIN_HOLD_S", "MIN_HOLDS", "QUANTILE", "MARGIN", "HINT_BELOW"]
 
 #: Holds shorter than this (s) are not read: their second half would be within a step's transient (``hyst excite``
 #: holds its steps 0.25 s).
@@ -33,6 +33,10 @@ MIN_HOLDS = 4
 QUANTILE = 0.25
 #: The hold noise replaces the white floor only when larger than this × it: on white noise it stays below 1.01×.
 MARGIN = 1.1
+#: Below this × the white floor, an unexplained remainder of a record without holds may be noise that is not
+#: white (band-limited noise 1–3× the white part leaves a complete model at 1.4–3.2× it): the diagnosis says so and
+#: how to give the sensor's noise.
+HINT_BELOW = 5.0
 #: Fewest samples read in one hold's second half.
 _MIN_SAMPLES = 64
 #: The input counts as held while it stays within this share of its range: a command held by a DAC or a

@@ -58,7 +58,7 @@ from .prune import prune
 from .reconfig import reconfigure
 from .swap import swap
 from .jointly import joint_pair
-from .colour import MARGIN as HOLD_MARGIN, hold_noise
+from .colour import HINT_BELOW as COLOUR_HINT, MARGIN as HOLD_MARGIN, hold_noise
 from .lines import Line, disturbance_lines, floor_with_lines, said as lines_said, without_lines
 from .ladder import climb
 from .setup import Candidate, Rung, Setup
@@ -242,13 +242,12 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
             f"{'it' if len(removed) == 1 else 'them'} (mains pickup or an amplifier's ripple?)", step=False)
     # Noise that is not white (a sensor slower than the sampling) is read where the input is held still (.colour);
     # after the lines are out, which would count twice.
-    held = hold_noise(t, u, y)
-    if held is not None and held.rms > HOLD_MARGIN * white:
+    reading = hold_noise(t, u, y)
+    held = reading if reading is not None and reading.rms > HOLD_MARGIN * white else None
+    if held is not None:
         noise = held.rms
         say(f"noise floor {fmt_len(noise)} from the record's {held.holds} holds: the sensor noise is not white "
             f"({noise / white:.2g}× its white part)", step=False)
-    else:
-        held = None
     given = None
     if sensor_noise is not None and sensor_noise > noise:
         noise, held, given = float(sensor_noise), None, float(sensor_noise)
@@ -314,6 +313,12 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         expl = (f"{expl}; the noise floor {fmt_len(noise)} holds white sensor noise ({fmt_len(white)}) and "
                 f"{lines_said(lines)} that the input does not drive (mains pickup or an amplifier's ripple?): no "
                 "model of the stage removes them — filter or shield the sensor to go below")
+    if (unexplained is not None and reading is None and sensor_noise is None and not lines
+            and ladder[-1].rmse < COLOUR_HINT * noise):
+        expl = (f"{expl}; the floor is the white part of the sensor noise only: this record holds its input still "
+                "too seldom to read the rest, and if the sensor's noise is not white (a sensor slower than the "
+                "sampling) this remainder may be noise — record the stage at rest for a few seconds and give its "
+                "RMS (hyst diagnose --sensor-noise)")
     # what the user is handed: no stop where the record shows none (the same output on the record: .settle)
     models = {k: (m, settle(m, th, t, u)) for k, (m, th) in models.items()}
     return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
