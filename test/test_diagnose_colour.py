@@ -6,7 +6,7 @@ import pytest
 from scipy.signal import lfilter
 
 from hyst_model.diagnose.colour import MARGIN, hold_noise, still_spans
-from hyst_model.effects.signals import noise_floor
+from hyst_model.effects.signals import noise_floor, record_floor
 
 RATE, N = 2000.0, 16000
 T = np.arange(N) / RATE
@@ -39,7 +39,8 @@ def test_white_noise_behind_creep_and_ringing_stays_at_the_white_floor(seed):
     y = _stage(u) + SIGMA * rng.standard_normal(N)
     h = hold_noise(T, u, y)
     assert h is not None and h.holds >= 4
-    assert 0.8 * SIGMA < h.rms < MARGIN * noise_floor(y)      # not taken: the floor stays the white one
+    white = record_floor(y, y - _stage(u))                    # as diagnose judges it (the exact model's residual)
+    assert 0.8 * SIGMA < h.rms < MARGIN * white               # not taken: the floor stays the white one
 
 
 @pytest.mark.parametrize("fc", (20.0, 60.0, 200.0))
@@ -112,7 +113,7 @@ def test_sensor_noise_given_for_a_record_without_holds():
     assert "sensor noise given" in d.explanation and d.to_json()["noise_floor_given"] == total
     low = diagnose(c.t, c.u, c.y, sensor_noise=0.5 * d0.noise_white)
     assert low.noise == d0.noise and low.noise_given is None and low.missing == "unexplained"
-    assert "more than the sensor noise given" in low.explanation
+    assert "the record shows more noise" in low.explanation and "than the sensor noise given" in low.explanation
 
 
 def test_sensor_noise_option_refuses_what_is_not_an_rms(tmp_path):
@@ -169,3 +170,46 @@ def test_the_identification_schedule_holds_long_enough_to_read_the_noise():
     hc = hold_noise(t, r.u_applied, r.y + extra)
     total = float(np.sqrt(h.rms ** 2 + np.mean(extra ** 2)))
     assert hc is not None and 0.8 * total < hc.rms < 1.1 * total and hc.rms > MARGIN * h.rms
+
+
+def test_compare_survives_a_noiseless_record_and_does_not_call_pickup_coloured_noise():
+    """A noiseless step record (white part 0) gives findings, not a division by zero; a 50 Hz line on white noise
+    is named as pickup, and the holds (read without it) say nothing about noise that is not white."""
+    from hyst_model.diagnose.report import findings
+    from hyst_model.diagnose.stats import compare_stats
+    rng = np.random.default_rng(21)
+    u = _steps(rng)
+    truth = _stage(u)
+    clean = compare_stats(T, u, truth, truth)
+    assert clean.to_dict()["noise_holds"] is None and isinstance(findings(clean), list)
+    y = truth + SIGMA * rng.standard_normal(N) + 4 * SIGMA * np.sin(2 * np.pi * 50.0 * T + 0.3)
+    st = compare_stats(T, u, y, truth)
+    said = " ".join(findings(st))
+    assert "mains pickup" in said and "held still" not in said and st.to_dict()["noise_holds"] is None
+
+
+def test_the_floor_and_its_words():
+    """What the floor is made of (.floor): holds and lines together, a value given above and below what the record
+    shows; the holds read without the lines counted beside them."""
+    from hyst_model.diagnose.colour import HeldNoise
+    from hyst_model.diagnose.floor import Floor, read_floor
+    from hyst_model.diagnose.lines import Line
+    line = Line(50.0, 3e-9, 900.0)
+    both = Floor(2e-9, HeldNoise(4e-9, 6, 2000), (line,))
+    assert both.value == pytest.approx(np.hypot(4e-9, line.rms)) and not both.given_used
+    w = both.words()
+    assert "6 holds" in w and "50 Hz" in w and "removes them" in w
+    assert "sensor noise given" not in w
+    low = Floor(2e-9, HeldNoise(4e-9, 6, 2000), (), given=3e-9)
+    assert low.value == 4e-9 and "the record shows more noise (4 nm) than the sensor noise given (3 nm)" in low.words()
+    high = Floor(2e-9, None, (line,), given=9e-9)
+    assert high.value == 9e-9 and high.given_used
+    assert high.words().startswith("the noise floor 9 nm is the sensor noise given") and "50 Hz" in high.words()
+    assert Floor(2e-9).words() == "" and Floor(2e-9).value == 2e-9
+    rng = np.random.default_rng(22)
+    u = _steps(rng)
+    y = _stage(u) + SIGMA * rng.standard_normal(N) + line.signal(T)
+    with_line, _ = read_floor(T, u, y, SIGMA, lines=[line])
+    assert with_line.held is None and with_line.value == pytest.approx(np.hypot(SIGMA, line.rms))
+    without, reading = read_floor(T, u, y, SIGMA)
+    assert reading is not None and without.held is not None      # the line alone would read as "not white"

@@ -200,9 +200,9 @@ def test_periodic_input_is_not_refined_harmonic_by_harmonic():
     assert len(calls) <= 6 + 3 * L.MAX_LINES
 
 
-def test_a_bench_sensors_harmonics_are_taken_and_a_longer_list_says_more_may_remain():
+def test_a_bench_sensors_harmonics_are_taken_and_a_longer_list_says_where_the_search_stops():
     """Mains pickup through a rectifier: the mains and seven harmonics are all found (a cap of four left half of
-    them in the floor); with ten lines the search stops at MAX_LINES and the words say more may remain."""
+    them in the floor); with ten lines the search stops at MAX_LINES and the words say so."""
     from hyst_model.diagnose.lines import MAX_LINES, said
     rng = np.random.default_rng(31)
     f = 50.0 * rng.uniform(0.998, 1.002)
@@ -214,7 +214,7 @@ def test_a_bench_sensors_harmonics_are_taken_and_a_longer_list_says_more_may_rem
                    for i in range(k))
     eight = disturbance_lines(T, u, base + hum(8), SIGMA)
     assert sorted(round(ln.frequency / f) for ln in eight) == list(range(1, 9))
-    assert "more may remain" not in said(eight[:MAX_LINES - 1])
+    assert "the search stops" not in said(eight[:MAX_LINES - 1])
     ten = disturbance_lines(T, u, base + hum(10), SIGMA)
     assert len(ten) == MAX_LINES
-    assert "more may remain" in said(ten)
+    assert "the search stops at 8 lines" in said(ten)

@@ -58,8 +58,9 @@ from .prune import prune
 from .reconfig import reconfigure
 from .swap import swap
 from .jointly import joint_pair
-from .colour import HINT_BELOW as COLOUR_HINT, MARGIN as HOLD_MARGIN, hold_noise
-from .lines import Line, disturbance_lines, floor_with_lines, said as lines_said, without_lines
+from .colour import HINT_BELOW as COLOUR_HINT
+from .floor import read_floor
+from .lines import disturbance_lines, said as lines_said, without_lines
 from .ladder import climb
 from .setup import Candidate, Rung, Setup
 from .stages import refit_all, screen_all
@@ -91,7 +92,7 @@ class Diagnosis:
     caution: str | None = None  # the base does not carry over to the hold-out: the record may not determine it
     undetermined: list = field(default_factory=list)  # effects the record cannot tell apart (.undetermined)
     #: The white part of the floor (second differences) and the output's lines the input does not drive
-    #: (.lines); ``noise`` is the two together.
+    #: (.lines); ``noise`` is the floor they make with the holds' reading or the value given (.floor).
     noise_white: float | None = None
     disturbances: list = field(default_factory=list)
     #: The first this many disturbances were taken out of the record before fitting (:meth:`record_fitted`); the
@@ -233,7 +234,6 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     # path: both write the same model); a line moves a range or a centre by its amplitude, nanometres on microns.
     white = noise
     removed = disturbance_lines(t, u, e_base, white)
-    lines: list[Line] = []
     if removed:
         y = without_lines(t, y, removed)
         th_base = fit_(base_model, t, u, y, th_base)
@@ -241,17 +241,13 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         say(f"took {lines_said(removed)} out of the output: the input does not drive "
             f"{'it' if len(removed) == 1 else 'them'} (mains pickup or an amplifier's ripple?)", step=False)
     # Noise that is not white (a sensor slower than the sampling) is read where the input is held still (.colour);
-    # after the lines are out, which would count twice.
-    reading = hold_noise(t, u, y)
-    held = reading if reading is not None and reading.rms > HOLD_MARGIN * white else None
-    if held is not None:
-        noise = held.rms
-        say(f"noise floor {fmt_len(noise)} from the record's {held.holds} holds: the sensor noise is not white "
-            f"({noise / white:.2g}× its white part)", step=False)
-    given = None
-    if sensor_noise is not None and sensor_noise > noise:
-        noise, held, given = float(sensor_noise), None, float(sensor_noise)
-    elif sensor_noise is not None:
+    # after the lines are out, which would count twice. The user's value where larger (.floor).
+    floor, reading = read_floor(t, u, y, white, sensor_noise)
+    noise = floor.value
+    if floor.held is not None:
+        say(f"noise floor {fmt_len(floor.held.rms)} from the record's {floor.held.holds} holds: the sensor noise is "
+            f"not white ({floor.held.rms / white:.2g}× its white part)", step=False)
+    if sensor_noise is not None and not floor.given_used:
         say(f"the record shows more noise ({fmt_len(noise)}) than the sensor noise given "
             f"({fmt_len(sensor_noise)}): the record's is the floor", step=False)
     s = Setup(t, u, y, val, dt, cfg, fixed, base, base_model, names, fit_, say, noise, th_base, e_base,
@@ -273,11 +269,10 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     if ladder[-1].model != base:   # a line the base's larger error hid (a step record's transients)
         m_fin, th_fin = models[ladder[-1].model]
         more = disturbance_lines(t, u, y - _simulate(m_fin, th_fin, t, u), white)
-        if floor_with_lines(white, more) > noise:
-            lines, noise = more, floor_with_lines(white, more)
-            s.noise = noise
-            say(f"noise floor {fmt_len(noise)}: white {fmt_len(white)} and {lines_said(lines)} in the final model's "
-                "residual", step=False)
+        if more:   # counted in the floor, and the holds read again without them
+            floor, reading = read_floor(t, u, y, white, sensor_noise, more)
+            noise = s.noise = floor.value
+            say(f"noise floor {fmt_len(noise)} with {lines_said(more)} in the final model's residual", step=False)
     ranked, missing, unexplained, expl = verdict(s, cands, ladder, models, chosen, unexplained_factor,
                                                  _explain)           # 4. the answer in words
     base_train = rmse(s.e_base[train])
@@ -298,22 +293,9 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         expl = (f"{expl}; {lines_said(removed)} in the output, which the input does not drive (mains pickup or an "
                 "amplifier's ripple?), {} taken out of the record before fitting: every RMSE here is of the record "
                 "without {}".format(*(("was", "it") if len(removed) == 1 else ("were", "them"))))
-    if given is not None and not lines:
-        expl = (f"{expl}; the noise floor {fmt_len(noise)} is the sensor noise given, {noise / white:.2g}× the "
-                f"white part this record shows ({fmt_len(white)})")
-    elif sensor_noise is not None and not lines:
-        expl = (f"{expl}; the noise floor {fmt_len(noise)} is what the record shows, more than the sensor noise "
-                f"given ({fmt_len(sensor_noise)})")
-    if held is not None and not lines:
-        expl = (f"{expl}; the noise floor {fmt_len(noise)} is the sensor noise read in the record's {held.holds} "
-                f"holds (the input still), {noise / white:.2g}× its white part ({fmt_len(white)}): the sensor's "
-                "noise is not white (electronics slower than the sampling, or the bench vibrating?) and no model "
-                "of the stage removes it")
-    if lines:
-        expl = (f"{expl}; the noise floor {fmt_len(noise)} holds white sensor noise ({fmt_len(white)}) and "
-                f"{lines_said(lines)} that the input does not drive (mains pickup or an amplifier's ripple?): no "
-                "model of the stage removes them — filter or shield the sensor to go below")
-    if (unexplained is not None and reading is None and sensor_noise is None and not lines
+    if floor.words():
+        expl = f"{expl}; {floor.words()}"
+    if (unexplained is not None and reading is None and sensor_noise is None and not floor.lines
             and ladder[-1].rmse < COLOUR_HINT * noise):
         expl = (f"{expl}; the floor is the white part of the sensor noise only: this record holds its input still "
                 "too seldom to read the rest, and if the sensor's noise is not white (a sensor slower than the "
@@ -322,9 +304,9 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     # what the user is handed: no stop where the record shows none (the same output on the record: .settle)
     models = {k: (m, settle(m, th, t, u)) for k, (m, th) in models.items()}
     return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
-                     time.perf_counter() - t0, models, unexplained, caution, und, white, removed + lines,
-                     len(removed), held.rms if held is not None and not lines else None,
-                     given if not lines else None)
+                     time.perf_counter() - t0, models, unexplained, caution, und, white, removed + list(floor.lines),
+                     len(removed), floor.held.rms if floor.held is not None else None,
+                     floor.value if floor.given_used else None)
 
 
 def _explain(c: Candidate, base: str, base_val: float) -> str:

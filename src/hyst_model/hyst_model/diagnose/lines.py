@@ -22,8 +22,8 @@ them (:func:`floor_with_lines`). A line counts only when all of these hold:
 * **it matters**: its RMS is at least ``MIN_SHARE`` of the white-noise floor (smaller ones change the floor by
   little).
 
-At most ``MAX_LINES`` are looked for (the strongest first); a list that long says so in words (:func:`said`:
-more may remain). A line's frequency, amplitude and phase are fitted on the whole record, held-out blocks
+At most ``MAX_LINES`` are looked for (the strongest first); a list that long says so in words (:func:`said`: the
+search stops there). A line's frequency, amplitude and phase are fitted on the whole record, held-out blocks
 included: the periodogram and the quarters' stationarity test need it uniform and whole, and the three numbers
 are the sensor's, not the stage's — taken out of every model's residual alike, they move no comparison between
 models (what the held-out blocks are for).
@@ -266,7 +266,7 @@ def said(lines: list[Line]) -> str:
         return ""
     from ..effects.signals import fmt_len
     parts = ", ".join(f"{ln.frequency:.4g} Hz ({fmt_len(ln.amplitude)} amplitude)" for ln in lines)
-    more = f" (the search stops at {MAX_LINES} lines: more may remain)" if len(lines) >= MAX_LINES else ""
+    more = f" (the search stops at {MAX_LINES} lines)" if len(lines) >= MAX_LINES else ""
     return ("a line at " if len(lines) == 1 else "lines at ") + parts + more
 
 

@@ -47,11 +47,11 @@ def findings(st) -> list[str]:
     look at first); ``hyst compare`` prints them and the report lists them."""
     out: list[str] = []
     o = st.overall
-    held = st.extra.get("noise_holds")
+    held, white = st.extra.get("noise_holds"), st.extra.get("noise_white")
     noise = held if held else st.noise_sigma      # noise that is not white, where the holds show it
-    if held:
+    if held and white:
         out.append(f"The sensor noise read where the input is held still is {_um(held)}, "
-                   f"{held / st.noise_sigma:.1f}× its white part ({_um(st.noise_sigma)}): the noise is not white "
+                   f"{held / white:.1f}× its white part ({_um(white)}): the noise is not white "
                    "(a sensor slower than the sampling, or the bench vibrating?); no model removes it.")
     if noise > 0 and o.rmse < 1.25 * noise:
         out.append(f"The residual ({_um(o.rmse)} RMS) is at the sensor noise level ({_um(noise)}): "
@@ -323,9 +323,8 @@ def write_report(dir: str | os.PathLike, record, model_output: np.ndarray, stats
 def _lines_taken(diagnosis: Mapping[str, Any]) -> str:
     """The lines a diagnosis took out of the record, in words ("" for none)."""
     from .lines import Line, said
-    keys = ("frequency", "amplitude", "ratio", "phase")
-    return said([Line(**{k: float(ln[k]) for k in keys}) for ln in diagnosis.get("disturbances", []) or []
-                 if ln.get("removed")])
+    return said([Line(float(ln["frequency"]), float(ln["amplitude"]), 0.0)
+                 for ln in diagnosis.get("disturbances", []) or [] if ln.get("removed")])
 
 
 def _write_into(d: Path, t, u, y, yhat, record, stats, ladder, diagnosis, title) -> None:

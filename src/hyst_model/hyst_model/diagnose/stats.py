@@ -41,9 +41,10 @@ from typing import Any
 import numpy as np
 
 from .correlation import Correlation, auto_lag_step, autocorr, crosscorr, higher_order_tests, z_value
+from ..effects.signals import record_floor
 from .figures import Fit, _as_1d, fit_figures, noise_sigma
-from .colour import MARGIN as HOLD_MARGIN, hold_noise
-from .lines import disturbance_lines
+from .colour import hold_noise, not_white
+from .lines import disturbance_lines, without_lines
 from .segments import Segment, SegmentFit, fit_by_segment, segment_input
 from .spectra import harmonics, ringing, spectral_peaks
 
@@ -214,6 +215,7 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
     e = y - yhat
     step = auto_lag_step(n, max_lag, fs, u) if lag_step is None else int(lag_step)
     branches = fit_by_branch(u, y, yhat)
+    lines = disturbance_lines(t, u, e, noise_sigma(y))
     return CompareStats(
         fs=fs, noise_sigma=noise_sigma(y), overall=fit_figures(y, yhat),
         segments=fit_by_segment(t, u, y, yhat, **(segment_kw or {})),
@@ -223,15 +225,17 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
         higher=higher_order_tests(e, u, max_lag, step, conf, dt), lag_step=step,
         extra={"loop_orientation": loop_orientation(u, y), "harmonics": _harmonic_summary(t, u, e),
                "ringing": _ringing_summary(t, u, e, noise_sigma(y)), "peaks": _peak_summary(t, u, e, fs),
-               "disturbances": [ln.to_json() for ln in disturbance_lines(t, u, e, noise_sigma(y))],
-               "noise_holds": _held(t, u, y, noise_sigma(y))})
+               "disturbances": [ln.to_json() for ln in lines], **_held(t, u, y, e, lines)})
 
 
-def _held(t: np.ndarray, u: np.ndarray, y: np.ndarray, white: float) -> float | None:
-    """The output noise read in the record's holds (:mod:`.colour`) where it exceeds the white ``noise_sigma`` by
-    its margin (noise that is not white; diagnose's floor), else None."""
-    h = hold_noise(t, u, y)
-    return h.rms if h is not None and h.rms > HOLD_MARGIN * white else None
+def _held(t: np.ndarray, u: np.ndarray, y: np.ndarray, e: np.ndarray, lines: list) -> dict[str, float | None]:
+    """``noise_holds``: the output noise read in the record's holds without the residual's lines (:mod:`.colour`),
+    where it exceeds the white part ``noise_white`` (as ``hyst diagnose`` judges it: ``record_floor``) by the
+    margin — noise that is not white —, else None."""
+    white = record_floor(y, e)
+    h = hold_noise(t, u, without_lines(t, y, lines))
+    held = h.rms if h is not None and not_white(h, white, y) else None
+    return {"noise_holds": held, "noise_white": white}
 
 
 def _peak_summary(t: np.ndarray, u: np.ndarray, e: np.ndarray, fs: float) -> list[dict[str, float]]:
