@@ -14,8 +14,9 @@ SIGMA = 2e-9
 
 
 def _steps(rng: np.random.Generator) -> np.ndarray:
-    holds = rng.integers(int(0.4 * RATE), int(1.5 * RATE), N // int(0.4 * RATE) + 1)
-    return np.repeat(rng.uniform(0.0, 150.0, holds.size), holds)[:N]
+    """The benchmark generator's steps with holds (0.4–1.5 s) over the PEA's 0–150 V."""
+    from hyst_sim.generator.excitation import excitation
+    return excitation("steps", T, 0.0, 150.0, rng)
 
 
 def _stage(u: np.ndarray) -> np.ndarray:
