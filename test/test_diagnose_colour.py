@@ -214,3 +214,25 @@ def test_the_floor_and_its_words():
     assert with_line.held is None and with_line.value == pytest.approx(np.hypot(SIGMA, line.rms))
     without, reading = read_floor(T, u, y, SIGMA)
     assert reading is not None and without.held is not None      # the line alone would read as "not white"
+
+
+def test_sensor_noise_read_from_a_record_at_rest(tmp_path):
+    """``--sensor-noise REST``: the noise of a record of the stage at rest (drift over it removed), band-limited
+    noise included; a record whose input moves, a missing file or a word are one clear error each."""
+    from hyst_model.cli.diagnose import sensor_noise_arg
+    from hyst_model.errors import DataError
+    rng = np.random.default_rng(40)
+    extra = _coloured(rng, 30.0, 2.0 * SIGMA)
+    y = 3e-6 + 1e-9 * T + 4e-10 * T ** 2 + SIGMA * rng.standard_normal(N) + extra   # at rest, drifting
+    rest = tmp_path / "rest.csv"
+    np.savetxt(rest, np.column_stack([T, np.full(N, 75.0), y]), delimiter=",", header="t,u,y", comments="")
+    total = float(np.sqrt(SIGMA ** 2 + np.mean(extra ** 2)))
+    assert sensor_noise_arg(str(rest)) == pytest.approx(total, rel=0.1)
+    assert sensor_noise_arg("3e-9") == 3e-9 and sensor_noise_arg(None) is None
+    moving = tmp_path / "moving.csv"
+    np.savetxt(moving, np.column_stack([T, 75.0 + 0.1 * np.sin(T), y]), delimiter=",", header="t,u,y", comments="")
+    with pytest.raises(DataError, match="the input moves"):
+        sensor_noise_arg(str(moving))
+    for bad in (str(tmp_path / "none.csv"), "three", "-1e-9"):
+        with pytest.raises(DataError, match="--sensor-noise"):
+            sensor_noise_arg(bad)

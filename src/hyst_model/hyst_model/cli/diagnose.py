@@ -47,10 +47,10 @@ def register(subparsers) -> None:
     p.add_argument("--force", action="store_true", help="allow --report/--out to replace existing output")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--quiet", action="store_true", help="no progress display on stderr")
-    p.add_argument("--sensor-noise", type=positive_float, default=None, metavar="M",
-                   help="the sensor's noise RMS in metres, e.g. 3e-9 (from a record of the stage at rest): the "
-                        "noise floor where it is more than the record shows — noise that is not white, on a record "
-                        "without holds (steps with holds show it themselves)")
+    p.add_argument("--sensor-noise", default=None, metavar="M|REST",
+                   help="the sensor's noise RMS in metres (e.g. 3e-9), or a record (CSV or bag) of the stage at rest "
+                        "to read it from: the noise floor where it is more than the record shows — noise that is "
+                        "not white, on a record without holds (steps with holds show it themselves)")
     p.add_argument("--jobs", type=positive_int, default=None, metavar="N",
                    help="threads fitting the candidates side by side (default: the processors, at most 6; "
                         "the result does not depend on it)")
@@ -98,6 +98,32 @@ def _text(d, source: str, adm=None) -> str:
     return "\n".join(lines)
 
 
+def sensor_noise_arg(text: str | None, quiet: bool = True) -> float | None:
+    """``--sensor-noise``: an RMS in metres, or a record of the stage at rest to read it from
+    (:func:`hyst_model.diagnose.colour.rest_noise`); a bad value is one clear :class:`DataError`."""
+    if text is None:
+        return None
+    from ..errors import DataError
+    try:
+        return positive_float(text)
+    except argparse.ArgumentTypeError as err:
+        if not os.path.exists(text):
+            raise DataError(f"--sensor-noise: {err} (an RMS in metres, or a record of the stage at rest)") from err
+    from ..diagnose.colour import rest_noise
+    from ..io import load_record
+    rec = load_record(text)
+    try:
+        rms = rest_noise(rec.u, rec.y)
+    except ValueError as err:
+        raise DataError(f"--sensor-noise {text}: {err}") from err
+    if not rms > 0:
+        raise DataError(f"--sensor-noise {text}: the record at rest shows no noise at all")
+    if not quiet:
+        print(f"hyst diagnose: sensor noise {rms * 1e9:.3g} nm RMS read from {text} ({len(rec.y)} samples at rest, "
+              "a quadratic trend removed)", file=sys.stderr)
+    return rms
+
+
 def run(args: argparse.Namespace) -> int:
     """Entry point; returns the exit code (errors raise HystError → exit 2 in the dispatcher)."""
     from ..io.outputs import check_output
@@ -125,9 +151,10 @@ def run(args: argparse.Namespace) -> int:
     from ..effects import EFFECTS
     from .fit import parse_config
     user_cfg = parse_config(args.config, names or sorted(EFFECTS))
+    sensor_noise = sensor_noise_arg(args.sensor_noise, args.quiet)
     rec = load_checked(args)
     d = diagnose(rec.t, rec.u, rec.y, base=args.base, effects=names, progress=not args.quiet, config=user_cfg,
-                 jobs=args.jobs, sensor_noise=args.sensor_noise)
+                 jobs=args.jobs, sensor_noise=sensor_noise)
     # The model diagnose hands on is checked as hyst fit checks its fit (one path): Remark 4.1 and parameters on
     # their bounds, in the text, the JSON and the params file's provenance.
     from ..identify.admissible import check_admissible

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["HeldNoise", "hold_noise", "not_white", "still_spans", "MIN_HOLD_S", "MIN_HOLDS", "QUANTILE", "MARGIN",
-           "HINT_BELOW"]
+__all__ = ["HeldNoise", "hold_noise", "not_white", "rest_noise", "still_spans", "MIN_HOLD_S", "MIN_HOLDS",
+           "QUANTILE", "MARGIN", "HINT_BELOW"]
 
 #: Holds shorter than this (s) are not read: their second half would be within a step's transient (``hyst excite``
 #: holds its steps 0.25 s).
@@ -70,6 +70,24 @@ def not_white(reading: "HeldNoise | None", white: float, y: np.ndarray) -> bool:
     what its stage does there)."""
     span = float(np.ptp(y)) if np.size(y) else 0.0
     return reading is not None and white > _NOISELESS * span and reading.rms > MARGIN * white
+
+
+def rest_noise(u: np.ndarray, y: np.ndarray) -> float:
+    """The sensor noise (RMS, m) of a record of the stage at rest: ``y`` with a quadratic trend removed (drift and
+    the tail of creep over it). ``ValueError`` where the input ``u`` moves (more than 1e-6 of its level, at least
+    1 µV) or the record is shorter than 64 samples."""
+    u = np.asarray(u, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if y.size < _MIN_SAMPLES:
+        raise ValueError(f"a record at rest needs at least {_MIN_SAMPLES} samples, not {y.size}")
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
+        raise ValueError("the record at rest holds non-finite values")
+    moved = float(np.ptp(u))
+    if moved > 1e-6 * max(float(np.max(np.abs(u))), 1.0):
+        raise ValueError(f"the input moves by {moved:.3g} V in the record at rest: hold it still to read the noise")
+    x = np.linspace(-1.0, 1.0, y.size)
+    r = y - np.polyval(np.polyfit(x, y, 2), x)
+    return float(np.sqrt(float(r @ r) / (y.size - 3)))
 
 
 @dataclass(frozen=True)
