@@ -299,8 +299,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
             and ladder[-1].rmse < COLOUR_HINT * noise):
         expl = (f"{expl}; the floor is the white part of the sensor noise only: this record holds its input still "
                 "too seldom to read the rest, and if the sensor's noise is not white (a sensor slower than the "
-                "sampling) this remainder may be noise — record the stage at rest for a few seconds and give its "
-                "RMS (hyst diagnose --sensor-noise)")
+                "sampling) this remainder may be noise — record the stage at rest for a few seconds and give that "
+                "record or its RMS (hyst diagnose --sensor-noise REST)")
     # what the user is handed: no stop where the record shows none (the same output on the record: .settle)
     models = {k: (m, settle(m, th, t, u)) for k, (m, th) in models.items()}
     return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
