@@ -85,9 +85,14 @@ def rest_noise(u: np.ndarray, y: np.ndarray) -> float:
     moved = float(np.ptp(u))
     if moved > 1e-6 * max(float(np.max(np.abs(u))), 1.0):
         raise ValueError(f"the input moves by {moved:.3g} V in the record at rest: hold it still to read the noise")
+    return float(np.sqrt(_detrended_var(y)))
+
+
+def _detrended_var(y: np.ndarray) -> float:
+    """Variance of ``y`` about its least-squares quadratic trend (3 degrees of freedom taken)."""
     x = np.linspace(-1.0, 1.0, y.size)
     r = y - np.polyval(np.polyfit(x, y, 2), x)
-    return float(np.sqrt(float(r @ r) / (y.size - 3)))
+    return float(r @ r) / (y.size - 3)
 
 
 @dataclass(frozen=True)
@@ -121,9 +126,7 @@ def hold_noise(t: np.ndarray, u: np.ndarray, y: np.ndarray) -> HeldNoise | None:
         seg = y[a + (b - a) // 2:b]
         if seg.size < _MIN_SAMPLES:
             continue
-        x = np.linspace(-1.0, 1.0, seg.size)
-        r = seg - np.polyval(np.polyfit(x, seg, 2), x)
-        var.append(float(r @ r) / (seg.size - 3))
+        var.append(_detrended_var(seg))
         used += seg.size
     if len(var) < MIN_HOLDS:
         return None

@@ -293,8 +293,9 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         expl = (f"{expl}; {lines_said(removed)} in the output, which the input does not drive (mains pickup or an "
                 "amplifier's ripple?), {} taken out of the record before fitting: every RMSE here is of the record "
                 "without {}".format(*(("was", "it") if len(removed) == 1 else ("were", "them"))))
-    if floor.words():
-        expl = f"{expl}; {floor.words()}"
+    said_floor = floor.words()
+    if said_floor:
+        expl = f"{expl}; {said_floor}"
     if (unexplained is not None and reading is None and sensor_noise is None and not floor.lines
             and ladder[-1].rmse < COLOUR_HINT * noise):
         expl = (f"{expl}; the floor is the white part of the sensor noise only: this record holds its input still "

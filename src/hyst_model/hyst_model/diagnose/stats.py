@@ -43,8 +43,8 @@ import numpy as np
 from .correlation import Correlation, auto_lag_step, autocorr, crosscorr, higher_order_tests, z_value
 from ..effects.signals import record_floor
 from .figures import Fit, _as_1d, fit_figures, noise_sigma
-from .colour import hold_noise, not_white
-from .lines import disturbance_lines, without_lines
+from .floor import read_floor
+from .lines import disturbance_lines
 from .segments import Segment, SegmentFit, fit_by_segment, segment_input
 from .spectra import harmonics, ringing, spectral_peaks
 
@@ -215,16 +215,17 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
     e = y - yhat
     step = auto_lag_step(n, max_lag, fs, u) if lag_step is None else int(lag_step)
     branches = fit_by_branch(u, y, yhat)
-    lines = disturbance_lines(t, u, e, noise_sigma(y))
+    sigma = noise_sigma(y)
+    lines = disturbance_lines(t, u, e, sigma)
     return CompareStats(
-        fs=fs, noise_sigma=noise_sigma(y), overall=fit_figures(y, yhat),
+        fs=fs, noise_sigma=sigma, overall=fit_figures(y, yhat),
         segments=fit_by_segment(t, u, y, yhat, **(segment_kw or {})),
         branches=branches, levels=fit_by_level(u, y, yhat, n_levels),
         bands=fit_by_band(y, yhat, fs, band_edges),
         auto=autocorr(e, max_lag, step, conf, dt), cross=crosscorr(e, u, max_lag, step, conf, dt),
         higher=higher_order_tests(e, u, max_lag, step, conf, dt), lag_step=step,
         extra={"loop_orientation": loop_orientation(u, y), "harmonics": _harmonic_summary(t, u, e),
-               "ringing": _ringing_summary(t, u, e, noise_sigma(y)), "peaks": _peak_summary(t, u, e, fs),
+               "ringing": _ringing_summary(t, u, e, sigma), "peaks": _peak_summary(t, u, e, fs),
                "disturbances": [ln.to_json() for ln in lines], **_held(t, u, y, e, lines)})
 
 
@@ -233,9 +234,8 @@ def _held(t: np.ndarray, u: np.ndarray, y: np.ndarray, e: np.ndarray, lines: lis
     where it exceeds the white part ``noise_white`` (as ``hyst diagnose`` judges it: ``record_floor``) by the
     margin — noise that is not white —, else None."""
     white = record_floor(y, e)
-    h = hold_noise(t, u, without_lines(t, y, lines))
-    held = h.rms if h is not None and not_white(h, white, y) else None
-    return {"noise_holds": held, "noise_white": white}
+    floor, _ = read_floor(t, u, y, white, lines=lines)
+    return {"noise_holds": floor.held.rms if floor.held is not None else None, "noise_white": white}
 
 
 def _peak_summary(t: np.ndarray, u: np.ndarray, e: np.ndarray, fs: float) -> list[dict[str, float]]:
