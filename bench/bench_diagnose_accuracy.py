@@ -221,8 +221,9 @@ def main(argv: list[str] | None = None) -> str:
                     help="length of the generated records, s (default: the generator's 8 s)")
     ap.add_argument("--shapes", choices=("thesis", "wide"), default=None,
                     help="MBW truths: the thesis's shape (default) or shapes drawn wide (other actuators)")
-    ap.add_argument("--sensor", choices=("white", "hum", "coloured"), default=None,
-                    help="sensor noise: white (default), with mains pickup, or band-limited (hyst_sim.generator)")
+    ap.add_argument("--sensor", choices=("white", "hum", "coloured", "quantised"), default=None,
+                    help="sensor noise: white (default), with mains pickup, band-limited, or a reading quantised "
+                         "coarser than its noise (hyst_sim.generator)")
     a = ap.parse_args(["--n", "24"] if argv is None else argv)
     kw = {k: v for k, v in (("min_factor", a.min_factor), ("noise_margin", a.noise_margin)) if v is not None}
     from hyst_sim.generator.cases import FAMILY_WEIGHTS, family_kinds  # the generator's own family order

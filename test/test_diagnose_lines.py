@@ -83,7 +83,7 @@ def test_line_json_in_si():
 
 def test_generator_sensor_option():
     from hyst_sim.generator import SENSORS, generate_case
-    assert SENSORS == ("white", "hum", "coloured")
+    assert SENSORS == ("white", "hum", "coloured", "quantised")
     a, w = generate_case(11, "none"), generate_case(11, "none", sensor="white")
     assert np.array_equal(a.y, w.y) and np.array_equal(a.y_fresh, w.y_fresh)   # the white families unchanged
     for kind in ("hum", "coloured"):

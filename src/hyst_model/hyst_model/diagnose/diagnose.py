@@ -48,6 +48,7 @@ from hyst_common.blas import one_blas_thread
 
 from ..effects import effects_data_config
 from ..effects.settle import settle
+from ..effects.quantised import quantised_floor
 from ..effects.signals import record_floor, sample_time, fmt_len
 from ..errors import DataError, FitError
 from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scales, _simulate, candidate_names,
@@ -102,6 +103,9 @@ class Diagnosis:
     noise_holds: float | None = None
     #: The sensor noise the user gave (``sensor_noise``), where it is the floor: more than the record shows.
     noise_given: float | None = None
+    #: The reading's quantisation step (m), where coarser than its white noise: ``noise_white`` is then the
+    #: quantisation error with the noise, read by local fits (:mod:`~hyst_model.effects.quantised`).
+    noise_step: float | None = None
 
     def record_fitted(self, t: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The output the models were fitted to: ``y`` without the lines taken out (``y`` when none were)."""
@@ -115,6 +119,7 @@ class Diagnosis:
             "disturbances": [dict(ln.to_json(), removed=i < self.n_removed) for i, ln in enumerate(self.disturbances)],
             "noise_floor_holds": self.noise_holds,
             "noise_floor_given": self.noise_given,
+            "noise_floor_step": self.noise_step,
             "candidates": [{"effect": c.effect, "rmse": c.rmse, "improvement": c.improvement,
                             "significant": c.significant, "score": c.score, "t_stat": c.t_stat,
                             "rmse_without": c.rmse_without,
@@ -226,6 +231,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     th_base = fit_(base_model, t, u, y, None)
     e_base = y - _simulate(base_model, th_base, t, u)
     noise = record_floor(y, e_base)
+    step = quantised_floor(y, e_base)[1]   # a reading coarser than its noise: the floor is local fits' (said)
     # A line in the output the input does not drive (mains pickup, .lines) is the sensor's, not the stage's: it is
     # taken out of the record before any model sees it, and the base refitted from where it ended — a mode left
     # to it rings at the line and is named (generated stages without an effect: dynamics on 4 of 12 with pickup).
@@ -242,8 +248,11 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
             f"{'it' if len(removed) == 1 else 'them'} (mains pickup or an amplifier's ripple?)", step=False)
     # Noise that is not white (a sensor slower than the sampling) is read where the input is held still (.colour);
     # after the lines are out, which would count twice. The user's value where larger (.floor).
-    floor, reading = read_floor(t, u, y, white, sensor_noise)
+    floor, reading = read_floor(t, u, y, white, sensor_noise, step=step)
     noise = floor.value
+    if step > 0.0:
+        say(f"noise floor {fmt_len(white)}: the sensor reads in steps of {fmt_len(step)}, coarser than its white "
+            "noise (quantisation error and noise, read by local fits)", step=False)
     if floor.held is not None:
         say(f"noise floor {fmt_len(floor.held.rms)} from the record's {floor.held.holds} holds: the sensor noise is "
             f"not white ({floor.held.rms / white:.2g}× its white part)", step=False)
@@ -270,7 +279,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         m_fin, th_fin = models[ladder[-1].model]
         more = disturbance_lines(t, u, y - _simulate(m_fin, th_fin, t, u), white)
         if more:   # counted in the floor, and the holds read again without them
-            floor, reading = read_floor(t, u, y, white, sensor_noise, more)
+            floor, reading = read_floor(t, u, y, white, sensor_noise, more, step)
             noise = s.noise = floor.value
             say(f"noise floor {fmt_len(noise)} with {lines_said(more)} in the final model's residual", step=False)
     ranked, missing, unexplained, expl = verdict(s, cands, ladder, models, chosen, unexplained_factor,
@@ -307,7 +316,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     return Diagnosis(base, s.base_val, base_train, noise, ranked, missing, ladder, expl, n, dt,
                      time.perf_counter() - t0, models, unexplained, caution, und, white, removed + list(floor.lines),
                      len(removed), floor.held.rms if floor.held is not None else None,
-                     floor.value if floor.given_used else None)
+                     floor.value if floor.given_used else None, step if step > 0.0 else None)
 
 
 def _explain(c: Candidate, base: str, base_val: float) -> str:

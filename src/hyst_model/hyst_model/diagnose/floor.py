@@ -2,7 +2,9 @@
 
 Four sources, one floor (m RMS):
 
-* the white part, from second differences (:func:`~hyst_model.effects.signals.record_floor`) — always;
+* the white part, from second differences (:func:`~hyst_model.effects.signals.record_floor`) — always; for a
+  reading quantised in steps coarser than its white noise, the quantisation error with the noise, read by local
+  fits (:mod:`~hyst_model.effects.quantised`: second differences misread it), and the step is said;
 * noise that is not white, read where the input is held still (:mod:`.colour`) — where it exceeds the white part
   by :data:`~.colour.MARGIN`; read on the record without the lines below, which it would otherwise count as
   "not white";
@@ -29,10 +31,11 @@ __all__ = ["Floor", "read_floor"]
 class Floor:
     """What a diagnosis's noise floor is made of (SI: m)."""
 
-    white: float                       # second differences
+    white: float                       # second differences (local fits on a coarse lattice)
     held: HeldNoise | None = None      # read in the holds, where above MARGIN × white
     lines: tuple[Line, ...] = ()       # found in the final residual, counted here
     given: float | None = None         # the user's sensor noise, whatever its size
+    step: float = 0.0                  # the reading's quantisation step where coarser than its noise, else 0
 
     @property
     def measured(self) -> float:
@@ -56,12 +59,16 @@ class Floor:
             return out + (f"; the final model's residual also holds {said(list(self.lines))} that the input does "
                           "not drive" if self.lines else "")
         parts = []
+        if self.step > 0.0:
+            parts.append(f"the quantisation error of a sensor reading in steps of {fmt_len(self.step)} (coarser than "
+                         "its white noise), with that noise"
+                         + (f" ({fmt_len(self.white)})" if self.held is not None or self.lines else ""))
         if self.held is not None:
             parts.append(f"noise read in the record's {self.held.holds} holds (the input still), "
                          f"{fmt_len(self.held.rms)}, {self.held.rms / self.white:.2g}× its white part "
                          f"({fmt_len(self.white)}) — not white: electronics slower than the sampling, or the bench "
                          "vibrating?")
-        elif self.lines:
+        elif self.lines and self.step <= 0.0:
             parts.append(f"white sensor noise ({fmt_len(self.white)})")
         if self.lines:
             parts.append(f"{said(list(self.lines))} that the input does not drive (mains pickup or an amplifier's "
@@ -80,10 +87,11 @@ class Floor:
 
 
 def read_floor(t: np.ndarray, u: np.ndarray, y: np.ndarray, white: float, given: float | None = None,
-               lines: list[Line] | None = None) -> tuple[Floor, HeldNoise | None]:
-    """The floor of record ``y`` whose white part is ``white``, with ``lines`` (the final residual's) and the
-    user's ``given`` noise; and the holds' reading whatever its size (None: the record has too few holds)."""
+               lines: list[Line] | None = None, step: float = 0.0) -> tuple[Floor, HeldNoise | None]:
+    """The floor of record ``y`` whose white part is ``white``, with ``lines`` (the final residual's), the
+    user's ``given`` noise and the reading's coarse quantisation ``step`` (0: none); and the holds' reading
+    whatever its size (None: the record has too few holds)."""
     lines = list(lines or [])
     reading = hold_noise(t, u, without_lines(t, y, lines))
     held = reading if not_white(reading, white, y) else None
-    return Floor(white, held, tuple(lines), given), reading
+    return Floor(white, held, tuple(lines), given, step), reading

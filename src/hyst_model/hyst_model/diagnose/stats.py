@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from .correlation import Correlation, auto_lag_step, autocorr, crosscorr, higher_order_tests, z_value
+from ..effects.quantised import quantised_floor
 from ..effects.signals import record_floor
 from .figures import Fit, _as_1d, fit_figures, noise_sigma
 from .floor import read_floor
@@ -216,6 +217,9 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
     step = auto_lag_step(n, max_lag, fs, u) if lag_step is None else int(lag_step)
     branches = fit_by_branch(u, y, yhat)
     sigma = noise_sigma(y)
+    coarse, q = quantised_floor(y, e)
+    if q > 0.0:   # a reading coarser than its noise: differences misread its error (effects.quantised)
+        sigma = coarse
     lines = disturbance_lines(t, u, e, sigma)
     return CompareStats(
         fs=fs, noise_sigma=sigma, overall=fit_figures(y, yhat),
@@ -234,8 +238,10 @@ def _held(t: np.ndarray, u: np.ndarray, y: np.ndarray, e: np.ndarray, lines: lis
     where it exceeds the white part ``noise_white`` (as ``hyst diagnose`` judges it: ``record_floor``) by the
     margin — noise that is not white —, else None."""
     white = record_floor(y, e)
-    floor, _ = read_floor(t, u, y, white, lines=lines)
-    return {"noise_holds": floor.held.rms if floor.held is not None else None, "noise_white": white}
+    step = quantised_floor(y, e)[1]
+    floor, _ = read_floor(t, u, y, white, lines=lines, step=step)
+    return {"noise_holds": floor.held.rms if floor.held is not None else None, "noise_white": white,
+            "noise_step": step if step > 0.0 else None}
 
 
 def _peak_summary(t: np.ndarray, u: np.ndarray, e: np.ndarray, fs: float) -> list[dict[str, float]]:

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .quantised import quantised_floor
+
 __all__ = ["sample_time", "holds", "noise_floor", "smooth", "rate_of", "midrange", "corr", "fmt_len"]
 
 
@@ -60,7 +62,9 @@ def noise_floor(y: np.ndarray) -> float:
     """Robust white-noise level (same unit as y) from second differences: var(Δ²e) = 6σ² for white e.
 
     Smooth signal content sampled fast contributes little to Δ², and the median absolute deviation ignores
-    the few samples at steps. Quantised sensors are covered because quantisation noise is (nearly) white.
+    the few samples at steps. Quantisation error is white only where the noise dithers it (a white part of at
+    least half the step); a reading quantised more coarsely is read by :func:`record_floor` through
+    :func:`.quantised.quantised_floor` instead.
     """
     y = np.asarray(y, dtype=np.float64)
     if y.size < 5:
@@ -80,8 +84,12 @@ def record_floor(y: np.ndarray, e: np.ndarray) -> float:
     The second differences of y carry signal wherever the record moves fast (sweeps, sines near 100 Hz: the
     noise came out 1.6x too high on generated sweeps, 9x on one sine record), which hides small effects "at the
     noise floor"; the model's residual has that signal removed. Neither can underestimate white sensor noise, so
-    the smaller is kept (``hyst diagnose`` with the base's residual, ``hyst fit`` with its fit's).
+    the smaller is kept (``hyst diagnose`` with the base's residual, ``hyst fit`` with its fit's). A reading on a
+    lattice coarser than its white noise has the floor of :func:`.quantised.quantised_floor` instead.
     """
+    coarse, step = quantised_floor(y, e)
+    if step > 0.0:
+        return coarse
     floor_y, floor_e = noise_floor(y), noise_floor(e)
     return min(floor_y, floor_e) if floor_e > 0 else floor_y
 

@@ -57,9 +57,10 @@ def _mbw_truth(profile: str, rng: np.random.Generator) -> MBWParams:
 
 #: Truth families: the thesis's identified shape with its scales varied, or shapes drawn wide (other actuators).
 SHAPES = ("thesis", "wide")
-#: Sensor noise: white (the benchmark's own), white with mains pickup (a 50 or 60 Hz line and its third harmonic)
-#: or white with band-limited noise (sensor electronics slower than the sampling).
-SENSORS = ("white", "hum", "coloured")
+#: Sensor noise: white (the benchmark's own), white with mains pickup (a 50 or 60 Hz line and its third harmonic),
+#: white with band-limited noise (sensor electronics slower than the sampling), or a reading quantised in steps
+#: coarser than its white noise (a digital sensor or a coarse ADC).
+SENSORS = ("white", "hum", "coloured", "quantised")
 
 
 def _sensor(kind: str, seed: int, t: np.ndarray, noise: float, record: int) -> np.ndarray:
@@ -84,6 +85,24 @@ def _sensor(kind: str, seed: int, t: np.ndarray, noise: float, record: int) -> n
         x = lfilter([np.sqrt(1 - c * c)], [1.0, -c], phases.standard_normal(t.size))
         return level * x
     raise ValueError(f"sensor must be one of {', '.join(SENSORS)}, not {kind!r}")
+
+
+def _read(kind: str, seed: int, t: np.ndarray, clean: np.ndarray, white: np.ndarray, noise: float,
+          record: int) -> np.ndarray:
+    """The sensor's reading (m) of the stage's output ``clean`` with the standard-normal draw ``white``.
+
+    ``"quantised"``: the reading is rounded to a lattice of step q (its zero at a random offset) after white noise
+    σ' was added; q/σ' is drawn log-uniform in 2–10 (per sensor) and σ'² + q²/12 = ``noise``², so the reading's
+    error has the same RMS as the white families' and the effect sizes mean the same. Every other kind adds
+    ``noise`` × ``white`` and :func:`_sensor`'s part, as before (bit for bit)."""
+    if kind != "quantised":
+        return clean + noise * white + _sensor(kind, seed, t, noise, record)
+    rng = np.random.default_rng([seed, 7919])                  # the sensor: one draw for both records
+    ratio = float(np.exp(rng.uniform(np.log(2.0), np.log(10.0))))
+    sigma = noise / np.sqrt(1.0 + ratio * ratio / 12.0)
+    q = ratio * sigma
+    zero = rng.uniform(0.0, q)
+    return zero + q * np.round((clean + sigma * white - zero) / q)
 
 
 def _wide_truth(profile: str, rng: np.random.Generator) -> MBWParams:
@@ -218,12 +237,12 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
         strengths.append((f, amp))
         sizes.append(s / noise)
     ua, y = _apply(strengths, ctx, draws)
-    y = y + noise * nrng.standard_normal(t.size) + _sensor(sensor, seed, t, noise, 0)
+    y = _read(sensor, seed, t, y, nrng.standard_normal(t.size), noise, 0)
     # fresh record of the same stage: new noise; random excitations get a new realisation too
     fresh_u_seed = int(seeds[0]) if exc in ("triangles", "sweep") else int(seeds[2])
     uf, xf, ctxf, nrng_f = record(fresh_u_seed, int(seeds[2]) + 1)
     _, yf = _apply(strengths, ctxf, draws)
-    yf = yf + noise * nrng_f.standard_normal(t.size) + _sensor(sensor, seed, t, noise, 1)
+    yf = _read(sensor, seed, t, yf, nrng_f.standard_normal(t.size), noise, 1)
     expected: tuple[str, ...]
     if kind == "pi_truth":
         expected = ("pi_truth",)
