@@ -224,11 +224,14 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--sensor", choices=("white", "hum", "coloured", "quantised"), default=None,
                     help="sensor noise: white (default), with mains pickup, band-limited, or a reading quantised "
                          "coarser than its noise (hyst_sim.generator)")
+    ap.add_argument("--forms", choices=("own", "alt"), default=None,
+                    help="the library effects' physical forms: the benchmark's own (default) or other laws of the "
+                         "same physics (hyst_sim.generator.forms_alt)")
     a = ap.parse_args(["--n", "24"] if argv is None else argv)
     kw = {k: v for k, v in (("min_factor", a.min_factor), ("noise_margin", a.noise_margin)) if v is not None}
     from hyst_sim.generator.cases import FAMILY_WEIGHTS, family_kinds  # the generator's own family order
-    gen = {k: v for k, v in (("rate", a.rate), ("duration", a.duration), ("shapes", a.shapes), ("sensor", a.sensor))
-           if v is not None}
+    gen = {k: v for k, v in (("rate", a.rate), ("duration", a.duration), ("shapes", a.shapes), ("sensor", a.sensor),
+                             ("effect_forms", a.forms)) if v is not None}
     jobs = [(a.seed * 100000 + i, k, kw, gen) for i, k in enumerate(family_kinds(a.n))]
     if a.kinds:
         wanted = set(a.kinds.split(","))

@@ -107,3 +107,42 @@ def test_wide_shapes_are_admissible_stages_of_the_profiles_stroke():
     assert a.forms[0][0] != "" and not np.array_equal(a.y, b.y)
     with pytest.raises(ValueError, match="shapes"):
         generate_case(9, "none", shapes="narrow")
+
+
+def test_every_alternative_form_changes_the_output_and_scales_with_strength():
+    """The other laws of the same physics (``effect_forms="alt"``): each changes the output, more when stronger,
+    and the softening at the ends keeps the travel monotonic."""
+    from hyst_model.core import stage_model
+    from hyst_sim.generator.forms import Ctx
+    from hyst_sim.generator.forms_alt import ALT_FORMS, ALT_LIBRARY_NAME, draw_alt
+    rng = np.random.default_rng(0)
+    t = np.arange(8000) / 2000.0
+    u = 75 + 60 * np.sin(2 * np.pi * 1.5 * t) * np.clip(t / 0.2, 0, 1)
+    sim = stage_model("pea").simulate
+    x = sim(u)
+    for name, (fn, _) in ALT_FORMS.items():
+        c = Ctx(t, u, sim, x, 30e-6, draw_alt(rng, 2000.0))
+        small = np.sqrt(np.mean((fn(c, 0.2)[1] - x) ** 2))
+        large = np.sqrt(np.mean((fn(c, 1.0)[1] - x) ** 2))
+        assert np.all(np.isfinite(fn(c, 1.0)[1])) and large > 1e-9 and large > small, name
+    assert set(ALT_LIBRARY_NAME.values()) == set(LIBRARY_NAME.values()) - {"unexplained"}
+    assert not set(ALT_FORMS) & set(FORMS)
+    from hyst_sim.generator.forms_alt import sat_cubic
+    order = np.argsort(x)
+    assert np.all(np.diff(sat_cubic(Ctx(t, u, sim, x, 30e-6, {}), 1.0)[1][order]) >= -1e-18)   # float ties
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_alternative_forms_families_are_labelled_and_the_own_family_is_unchanged(seed):
+    from hyst_sim.generator.cases import family_kinds
+    from hyst_sim.generator.forms_alt import ALT_FORMS, ALT_LIBRARY_NAME
+    kind = family_kinds(12)[seed]
+    a = generate_case(seed, kind, effect_forms="alt")
+    assert np.all(np.isfinite(a.y)) and np.all(np.isfinite(a.y_fresh))
+    if kind in ("single_large", "single_small", "pair"):
+        assert all(f in ALT_FORMS for f, _ in a.forms)
+        assert a.expected == tuple(ALT_LIBRARY_NAME[f] for f, _ in a.forms)
+    own, default = generate_case(seed, kind, effect_forms="own"), generate_case(seed, kind)
+    assert np.array_equal(own.y, default.y) and own.forms == default.forms
+    with pytest.raises(ValueError, match="effect_forms"):
+        generate_case(seed, kind, effect_forms="other")

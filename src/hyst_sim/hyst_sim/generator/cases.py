@@ -11,9 +11,10 @@ from hyst_model.core import MBWParams, stage_model
 
 from .excitation import EXCITATIONS, excitation
 from .forms import FORMS, LIBRARY_NAME, Ctx, draw
+from .forms_alt import ALT_FORMS, ALT_LIBRARY_NAME, draw_alt
 
 __all__ = ["Case", "generate_case", "case_family", "family_kinds", "KINDS", "EXPECTED", "SHAPES", "SENSORS",
-           "FAMILY_WEIGHTS"]
+           "EFFECT_FORMS", "FAMILY_WEIGHTS"]
 
 #: Case kinds drawn by :func:`case_family`: one effect (large ≥ 5× noise, small 3–5×), a pair, an effect outside
 #: the library, none, and a non-MBW (Prandtl–Ishlinskii) truth with no effect.
@@ -61,6 +62,10 @@ SHAPES = ("thesis", "wide")
 #: white with band-limited noise (sensor electronics slower than the sampling), or a reading quantised in steps
 #: coarser than its white noise (a digital sensor or a coarse ADC).
 SENSORS = ("white", "hum", "coloured", "quantised")
+#: The library effects' physical forms: the benchmark's own (:mod:`.forms`) or other laws (:mod:`.forms_alt`).
+EFFECT_FORMS = ("own", "alt")
+_ALL_FORMS = {**FORMS, **ALT_FORMS}
+_NAME = {**LIBRARY_NAME, **ALT_LIBRARY_NAME}
 
 
 def _sensor(kind: str, seed: int, t: np.ndarray, noise: float, record: int) -> np.ndarray:
@@ -156,7 +161,7 @@ def _apply(forms, ctx: Ctx, draws: dict[str, dict]):
     u, y = ctx.u, ctx.x
     for name, amp in forms:
         c = Ctx(ctx.t, u, ctx.simulate, y, ctx.span, draws[name])
-        u, y = FORMS[name][0](c, amp)
+        u, y = _ALL_FORMS[name][0](c, amp)
     return u, y
 
 
@@ -167,7 +172,7 @@ def _calibrate(name: str, ctx: Ctx, draws: dict[str, dict], target: float) -> tu
     c = Ctx(ctx.t, ctx.u, ctx.simulate, ctx.x, ctx.span, draws[name])
 
     def size(a: float) -> float:
-        return float(np.sqrt(np.mean((FORMS[name][0](c, a)[1] - ctx.x) ** 2)))
+        return float(np.sqrt(np.mean((_ALL_FORMS[name][0](c, a)[1] - ctx.x) ** 2)))
     lo, hi = 0.0, 1.0
     if size(hi) <= target:
         return hi, size(hi)
@@ -178,15 +183,20 @@ def _calibrate(name: str, ctx: Ctx, draws: dict[str, dict], target: float) -> tu
 
 
 def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, duration: float = DURATION,
-                  shapes: str = "thesis", sensor: str = "white") -> Case:
+                  shapes: str = "thesis", sensor: str = "white", effect_forms: str = "own") -> Case:
     """One case, fully determined by ``seed`` (and ``kind``; drawn from :data:`KINDS` if omitted).
 
     ``rate`` (Hz) and ``duration`` (s) set the record's sampling; the defaults are the benchmark's own family, and
     other values give families the diagnosis was not developed on (a mode's frequency stays below 0.35 × rate).
     ``shapes``: the MBW truths' family (:data:`SHAPES`): ``"thesis"`` (the benchmark's own) or ``"wide"``.
     ``sensor`` (:data:`SENSORS`): what the sensor adds to the white noise — nothing (the benchmark's own), mains
-    pickup or band-limited noise; the rest of the case is the same as with white noise.
+    pickup, band-limited noise or a coarse quantiser; the rest of the case is the same as with white noise.
+    ``effect_forms`` (:data:`EFFECT_FORMS`): the library effects' physical forms — the benchmark's own
+    (:mod:`.forms`) or other laws of the same physics (:mod:`.forms_alt`); effects outside the library and the
+    cases without an effect are drawn alike.
     """
+    if effect_forms not in EFFECT_FORMS:
+        raise ValueError(f"effect_forms must be one of {', '.join(EFFECT_FORMS)}, not {effect_forms!r}")
     if shapes not in SHAPES:
         raise ValueError(f"shapes must be one of {', '.join(SHAPES)}, not {shapes!r}")
     if sensor not in SENSORS:
@@ -206,18 +216,18 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
         p = _mbw_truth(truth, rng) if shapes == "thesis" else _wide_truth(truth, rng)
         simulate = p.simulate
     noise = float(rng.uniform(1e-9, 4e-9))
-    lib = [f for f, n in LIBRARY_NAME.items() if n != "unexplained"]
+    lib = [f for f, n in (ALT_LIBRARY_NAME if effect_forms == "alt" else LIBRARY_NAME).items() if n != "unexplained"]
     out = [f for f, n in LIBRARY_NAME.items() if n == "unexplained"]
     if kind in ("single_large", "single_small"):
         forms = [str(rng.choice(lib))]
     elif kind == "pair":
         a = str(rng.choice(lib))
-        forms = [a, str(rng.choice([f for f in lib if LIBRARY_NAME[f] != LIBRARY_NAME[a]]))]
+        forms = [a, str(rng.choice([f for f in lib if _NAME[f] != _NAME[a]]))]
     elif kind == "outside":
         forms = [str(rng.choice(out))]
     else:
         forms = []
-    draws = {f: draw(f, rng, duration, rate) for f in forms}
+    draws = {f: draw_alt(rng, rate) if f in ALT_FORMS else draw(f, rng, duration, rate) for f in forms}
     lo_hi = (3.0, 5.0) if kind == "single_small" else (5.0, 200.0)
     targets = [float(np.exp(rng.uniform(*np.log(lo_hi)))) * noise for _ in forms]
     seeds = rng.integers(0, 2**31, 3)
@@ -249,15 +259,15 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
     elif not forms:
         expected = ("none",)
     else:
-        expected = tuple(LIBRARY_NAME[f] for f in forms)
+        expected = tuple(_NAME[f] for f in forms)
     return Case(seed, kind, truth, exc, strengths, expected, sizes, noise, t, u, y, t.copy(), uf, yf)
 
 
 def case_family(n: int, seed: int = 0, *, rate: float = RATE, duration: float = DURATION,
-                shapes: str = "thesis", sensor: str = "white") -> list[Case]:
+                shapes: str = "thesis", sensor: str = "white", effect_forms: str = "own") -> list[Case]:
     """``n`` cases with a balanced mix of :data:`KINDS` (singles weighted up), seeds ``seed*100000 + i``."""
-    return [generate_case(seed * 100000 + i, k, rate=rate, duration=duration, shapes=shapes, sensor=sensor)
-            for i, k in enumerate(family_kinds(n))]
+    return [generate_case(seed * 100000 + i, k, rate=rate, duration=duration, shapes=shapes, sensor=sensor,
+                          effect_forms=effect_forms) for i, k in enumerate(family_kinds(n))]
 
 
 #: How often each kind comes in a family (singles weighted up), in the order they cycle.
