@@ -14,5 +14,5 @@ from .cases import EFFECT_FORMS, EXPECTED, KINDS, SENSORS, Case, case_family, ge
 from .excitation import EXCITATIONS, excitation
 from .forms import FORMS
 
-__all__ = ["Case", "generate_case", "case_family", "KINDS", "EXPECTED", "SENSORS", "EFFECT_FORMS", "FORMS", "EXCITATIONS",
-           "excitation"]
+__all__ = ["Case", "generate_case", "case_family", "KINDS", "EXPECTED", "SENSORS", "EFFECT_FORMS", "FORMS",
+           "EXCITATIONS", "excitation"]
