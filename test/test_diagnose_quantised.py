@@ -107,6 +107,8 @@ def test_compare_says_the_steps_and_judges_the_residual_against_their_error():
     assert st.noise_sigma == pytest.approx(_rms(y - x), rel=0.1)
     assert noise_sigma(y) < 0.5 * _rms(y - x)                      # what the differences said
     assert "steps of 10 nm" in said and "at the sensor noise level" in said
+    from hyst_model.cli.compare import summary_text
+    assert "read in steps of 10 nm" in summary_text(st)
     fine = compare_stats(T, u, _read(x, 1e-9, 1e-9, seed=4), x)
     assert fine.to_dict()["noise_step"] is None and "steps of" not in " ".join(findings(fine))
 

@@ -128,7 +128,9 @@ def summary_text(st, title: str = "") -> str:
     lines = []
     if title:
         lines.append(title)
-    lines.append(f"samples {o.n} at {st.fs:.6g} Hz ({o.n / st.fs:.4g} s); output noise ≈ {_um(st.noise_sigma)}")
+    q = st.extra.get("noise_step")
+    lines.append(f"samples {o.n} at {st.fs:.6g} Hz ({o.n / st.fs:.4g} s); output noise ≈ {_um(st.noise_sigma)}"
+                 + (f" (read in steps of {_um(q)}: quantisation error and noise)" if q else ""))
     lines.append(f"overall  RMSE {_um(o.rmse)}  NRMSE {100 * o.nrmse:.2f} %  fit {_pct(o.fit_percent)}  "
                  f"bias {_um(o.bias)}  max {_um(o.max_abs)}")
     lines.append("by segment:")
