@@ -155,3 +155,51 @@ def test_generator_quantised_sensor():
     assert 1.73 * c.noise < q < 3.27 * c.noise
     assert _rms(c.y - seen[0]) == pytest.approx(c.noise, rel=0.1)
     assert not np.array_equal(c.y - seen[0], c.y_fresh - seen[1])
+
+
+def test_lines_are_out_of_the_floor_of_a_reading_in_coarse_steps():
+    """A 150 Hz line on a reading in 5 nm steps (0.7 nm noise, 1 kHz): local fits read much of a line, so the floor
+    is read on the reading without the lines found — not with their power (1.43× too high), and not by second
+    differences where the line pushed the local reading past the coarse limit (3 nm: step lost)."""
+    from hyst_model.diagnose.stats import compare_stats
+    rate = 1000.0
+    t = np.arange(8000) / rate
+    x = 15e-6 + 10e-6 * np.sin(2 * np.pi * 0.37 * t)
+    u = 75.0 + 60.0 * np.sin(2 * np.pi * 0.37 * t)
+    rng = np.random.default_rng(2)
+    q, sigma = 5e-9, 0.7e-9
+    white = sigma * rng.standard_normal(t.size)
+    clean = 0.37 * q + q * np.round((x + white - 0.37 * q) / q)
+    true = _rms(clean - x)
+    for amp in (2e-9, 3e-9):
+        y = 0.37 * q + q * np.round((x + amp * np.sin(2 * np.pi * 150.0 * t + 0.3) + white - 0.37 * q) / q)
+        st = compare_stats(t, u, y, x)
+        assert st.extra["disturbances"] and st.extra["noise_step"] == pytest.approx(q, rel=1e-6)
+        assert st.noise_sigma == pytest.approx(true, rel=0.15)
+
+
+def test_a_noiseless_ramp_and_a_short_record_are_not_a_quantiser():
+    """Every change alike is a noiseless record at constant speed, not a reading in steps; a record shorter than
+    one run of local fits gives no reading (the floor stays the second differences')."""
+    line = 1e-6 + 20e-9 * np.arange(N)                       # a simulated ramp, 20 nm a sample, no noise
+    assert lattice_step(line) == 0.0
+    assert quantised_floor(line, np.zeros(N)) == (0.0, 0.0)
+    assert record_floor(line, np.zeros(N)) < 1e-12
+    short = np.round(np.random.default_rng(0).normal(0.0, 5.0, 11)) * 1e-9
+    assert quantised_floor(short, short) == (0.0, 0.0)
+
+
+@pytest.mark.slow
+def test_diagnose_reads_the_coarse_floor_without_the_lines_it_takes_out():
+    from hyst_model.diagnose.diagnose import diagnose
+    rate = 1000.0
+    t = np.arange(8000) / rate
+    u = 75.0 + 60.0 * np.sin(2 * np.pi * 0.37 * t)
+    x = 15e-6 + 10e-6 * np.sin(2 * np.pi * 0.37 * t)
+    rng = np.random.default_rng(2)
+    q, white = 5e-9, 0.7e-9 * rng.standard_normal(t.size)
+    true = _rms(0.37 * q + q * np.round((x + white - 0.37 * q) / q) - x)
+    y = 0.37 * q + q * np.round((x + 2e-9 * np.sin(2 * np.pi * 150.0 * t + 0.3) + white - 0.37 * q) / q)
+    d = diagnose(t, u, y, effects=["drift"], jobs=1)
+    assert d.n_removed >= 1 and d.noise_step == pytest.approx(q, rel=1e-6)
+    assert d.noise_white == pytest.approx(true, rel=0.15)

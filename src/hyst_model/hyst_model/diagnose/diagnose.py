@@ -48,7 +48,7 @@ from hyst_common.blas import one_blas_thread
 
 from ..effects import effects_data_config
 from ..effects.settle import settle
-from ..effects.quantised import quantised_floor
+from ..effects.quantised import lattice_step, quantised_floor
 from ..effects.signals import record_floor, sample_time, fmt_len
 from ..errors import DataError, FitError
 from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scales, _simulate, candidate_names,
@@ -230,8 +230,9 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     say(f"fitting base model {base} on {n} samples ({train.sum()} train, {val.sum()} validation)")
     th_base = fit_(base_model, t, u, y, None)
     e_base = y - _simulate(base_model, th_base, t, u)
-    noise = record_floor(y, e_base)
-    step = quantised_floor(y, e_base)[1]   # a reading coarser than its noise: the floor is local fits' (said)
+    lattice = lattice_step(y)              # a reading in coarse steps: the floor is local fits' (said)
+    noise = record_floor(y, e_base, lattice)
+    step = quantised_floor(y, e_base, lattice)[1]
     # A line in the output the input does not drive (mains pickup, .lines) is the sensor's, not the stage's: it is
     # taken out of the record before any model sees it, and the base refitted from where it ended — a mode left
     # to it rings at the line and is named (generated stages without an effect: dynamics on 4 of 12 with pickup).
@@ -244,6 +245,9 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         y = without_lines(t, y, removed)
         th_base = fit_(base_model, t, u, y, th_base)
         e_base = y - _simulate(base_model, th_base, t, u)
+        if lattice > 0.0:   # local fits read much of a line: the floor of the reading without them
+            white = record_floor(y, e_base, lattice)
+            step = quantised_floor(y, e_base, lattice)[1]
         say(f"took {lines_said(removed)} out of the output: the input does not drive "
             f"{'it' if len(removed) == 1 else 'them'} (mains pickup or an amplifier's ripple?)", step=False)
     # Noise that is not white (a sensor slower than the sampling) is read where the input is held still (.colour);

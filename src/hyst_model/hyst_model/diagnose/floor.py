@@ -53,21 +53,26 @@ class Floor:
 
     def words(self) -> str:
         """The sentence a diagnosis adds about its floor ("" for white noise alone)."""
+        # what the record's differences or local fits show: its white part, or its quantisation error with it
+        shown = (f"the quantisation error with the white noise this record shows ({fmt_len(self.white)}; it reads "
+                 f"in steps of {fmt_len(self.step)})" if self.step > 0.0
+                 else f"the white part this record shows ({fmt_len(self.white)})")
         if self.given_used:
             out = (f"the noise floor {fmt_len(self.value)} is the sensor noise given, "
-                   f"{self.value / self.white:.2g}× the white part this record shows ({fmt_len(self.white)})")
+                   f"{self.value / self.white:.2g}× {shown}")
             return out + (f"; the final model's residual also holds {said(list(self.lines))} that the input does "
                           "not drive" if self.lines else "")
         parts = []
-        if self.step > 0.0:
+        if self.step > 0.0 and self.held is None:
             parts.append(f"the quantisation error of a sensor reading in steps of {fmt_len(self.step)} (coarser than "
-                         "its white noise), with that noise"
-                         + (f" ({fmt_len(self.white)})" if self.held is not None or self.lines else ""))
+                         "its white noise), with that noise" + (f" ({fmt_len(self.white)})" if self.lines else ""))
         if self.held is not None:
             parts.append(f"noise read in the record's {self.held.holds} holds (the input still), "
-                         f"{fmt_len(self.held.rms)}, {self.held.rms / self.white:.2g}× its white part "
-                         f"({fmt_len(self.white)}) — not white: electronics slower than the sampling, or the bench "
-                         "vibrating?")
+                         f"{fmt_len(self.held.rms)}, {self.held.rms / self.white:.2g}× "
+                         + ("the rest of the record's quantisation error with its white noise"
+                            f" ({fmt_len(self.white)}, in steps of {fmt_len(self.step)})" if self.step > 0.0
+                            else f"its white part ({fmt_len(self.white)})")
+                         + " — not white: electronics slower than the sampling, or the bench vibrating?")
         elif self.lines and self.step <= 0.0:
             parts.append(f"white sensor noise ({fmt_len(self.white)})")
         if self.lines:

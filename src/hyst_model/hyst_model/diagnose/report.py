@@ -338,7 +338,9 @@ def _write_into(d: Path, t, u, y, yhat, record, stats, ladder, diagnosis, title)
     o = st.overall
     parts = [f"<h1>{html.escape(title or 'hyst report')}</h1>",
              f"<p>data: {html.escape(str(getattr(record, 'source', '')))} — {o.n} samples at {st.fs:.6g} Hz; "
-             f"output noise ≈ {_nm(st.noise_sigma):.3g} nm</p>"]
+             f"output noise ≈ {_nm(st.noise_sigma):.3g} nm"
+             + (f" (read in steps of {_nm(st.extra['noise_step']):.3g} nm: quantisation error and noise)"
+                if st.extra.get("noise_step") else "") + "</p>"]
     if diagnosis:
         bl = diagnosis.get("baseline", {}) or {}
         parts.append(f"<h2>Diagnosis</h2><p>baseline {html.escape(str(bl.get('model', '?')))}: RMSE "

@@ -41,11 +41,11 @@ from typing import Any
 import numpy as np
 
 from .correlation import Correlation, auto_lag_step, autocorr, crosscorr, higher_order_tests, z_value
-from ..effects.quantised import quantised_floor
+from ..effects.quantised import lattice_step, quantised_floor
 from ..effects.signals import record_floor
 from .figures import Fit, _as_1d, fit_figures, noise_sigma
 from .floor import read_floor
-from .lines import disturbance_lines
+from .lines import disturbance_lines, without_lines
 from .segments import Segment, SegmentFit, fit_by_segment, segment_input
 from .spectra import harmonics, ringing, spectral_peaks
 
@@ -217,10 +217,14 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
     step = auto_lag_step(n, max_lag, fs, u) if lag_step is None else int(lag_step)
     branches = fit_by_branch(u, y, yhat)
     sigma = noise_sigma(y)
-    coarse, q = quantised_floor(y, e)
+    lattice = lattice_step(y)
+    coarse, q = quantised_floor(y, e, lattice)
     if q > 0.0:   # a reading coarser than its noise: differences misread its error (effects.quantised)
         sigma = coarse
     lines = disturbance_lines(t, u, e, sigma)
+    if lines and lattice > 0.0:   # local fits read much of a line: the floor of the reading without them
+        coarse, q = quantised_floor(without_lines(t, y, lines), without_lines(t, e, lines), lattice)
+        sigma = coarse if q > 0.0 else sigma
     return CompareStats(
         fs=fs, noise_sigma=sigma, overall=fit_figures(y, yhat),
         segments=fit_by_segment(t, u, y, yhat, **(segment_kw or {})),
@@ -237,9 +241,13 @@ def _held(t: np.ndarray, u: np.ndarray, y: np.ndarray, e: np.ndarray, lines: lis
     """``noise_holds``: the output noise read in the record's holds without the residual's lines (:mod:`.colour`),
     where it exceeds the white part ``noise_white`` (as ``hyst diagnose`` judges it: ``record_floor``) by the
     margin — noise that is not white —, else None."""
-    white = record_floor(y, e)
-    step = quantised_floor(y, e)[1]
-    floor, _ = read_floor(t, u, y, white, lines=lines, step=step)
+    lattice = lattice_step(y)
+    yc, ec = y, e
+    if lines and lattice > 0.0:   # as diagnose: the floor of the reading without the lines
+        yc, ec = without_lines(t, y, lines), without_lines(t, e, lines)
+    white = record_floor(yc, ec, lattice)
+    step = quantised_floor(yc, ec, lattice)[1]
+    floor, _ = read_floor(t, u, y, white, lines=lines, step=step)   # it reads the holds without the lines
     return {"noise_holds": floor.held.rms if floor.held is not None else None, "noise_white": white,
             "noise_step": step if step > 0.0 else None}
 

@@ -54,8 +54,11 @@ def lattice_step(y: np.ndarray) -> float:
     for k in range(1, MAX_DIVISOR + 1):   # a stage that never moves less than k steps a sample: its k-th part
         q = smallest / k
         r = nz / q
-        if float(np.mean(np.abs(r - np.round(r)) <= TOLERANCE)) >= ON_LATTICE:
-            return q
+        whole = np.round(r)
+        if float(np.mean(np.abs(r - whole) <= TOLERANCE)) >= ON_LATTICE:
+            # a reading changes by different numbers of steps, or not at all; every change alike is a noiseless
+            # record moving at a constant speed (a simulated ramp), not a quantiser
+            return q if nz.size < d.size or np.unique(whole).size > 1 else 0.0
     return 0.0
 
 
@@ -78,15 +81,18 @@ def local_noise(x: np.ndarray, window: int = WINDOW) -> float:
     return float(math.sqrt(float(np.median(var)) / (1.0 - 2.0 / (9.0 * nu)) ** 3))
 
 
-def quantised_floor(y: np.ndarray, e: np.ndarray | None = None) -> tuple[float, float]:
+def quantised_floor(y: np.ndarray, e: np.ndarray | None = None, step: float | None = None) -> tuple[float, float]:
     """``(floor, q)`` of a reading ``y`` on a coarse lattice (m RMS, m), given a model's residual ``e`` on it;
-    ``(0.0, 0.0)`` where the reading is not on a lattice or its step is fine enough for second differences.
+    ``(0.0, 0.0)`` where the reading is not on a lattice, its step is fine enough for second differences, or it
+    is shorter than one run of :data:`WINDOW` samples.
 
     The floor is the smaller local reading of ``y`` and ``e`` (each only overstates: the position's course in
     ``y``, the model's error in ``e``), at least q/√12. The step is coarse where that reading is below q/√3:
-    σ² + q²/12 < q²/3 is a white part σ below q/2 (Widrow)."""
-    q = lattice_step(y)
-    if q <= 0.0:
+    σ² + q²/12 < q²/3 is a white part σ below q/2 (Widrow). ``step``: the lattice's step when already known —
+    ``y`` may then be off it (the reading with lines the input does not drive taken out, whose power is not the
+    sensor's noise)."""
+    q = lattice_step(y) if step is None else float(step)
+    if q <= 0.0 or np.asarray(y).size < WINDOW:
         return 0.0, 0.0
     reads = [local_noise(y)]
     if e is not None:

@@ -77,7 +77,7 @@ def noise_floor(y: np.ndarray) -> float:
     return float(sigma)
 
 
-def record_floor(y: np.ndarray, e: np.ndarray) -> float:
+def record_floor(y: np.ndarray, e: np.ndarray, step: float | None = None) -> float:
     """The white-noise floor of a record ``y`` given a model's residual ``e`` on it (m): the smaller of the two
     :func:`noise_floor` values (the residual's where it is positive).
 
@@ -85,10 +85,11 @@ def record_floor(y: np.ndarray, e: np.ndarray) -> float:
     noise came out 1.6x too high on generated sweeps, 9x on one sine record), which hides small effects "at the
     noise floor"; the model's residual has that signal removed. Neither can underestimate white sensor noise, so
     the smaller is kept (``hyst diagnose`` with the base's residual, ``hyst fit`` with its fit's). A reading on a
-    lattice coarser than its white noise has the floor of :func:`.quantised.quantised_floor` instead.
+    lattice coarser than its white noise has the floor of :func:`.quantised.quantised_floor` instead (``step``:
+    that lattice's, when known from the record as read and ``y`` is the record with lines taken out).
     """
-    coarse, step = quantised_floor(y, e)
-    if step > 0.0:
+    coarse, q = quantised_floor(y, e, step)
+    if q > 0.0:
         return coarse
     floor_y, floor_e = noise_floor(y), noise_floor(e)
     return min(floor_y, floor_e) if floor_e > 0 else floor_y

@@ -34,7 +34,8 @@ def asym_exp(c: Ctx, a: float):        # the sensor's gain grows exponentially t
     z = ((c.x - lo) if c.draw["sign"] > 0 else (hi - c.x)) / s
     big = span / s
     bent = span * (np.expm1(z) - z) / max(float(np.expm1(big) - big), 1e-300)   # convex, 0 → span
-    return c.u, c.x + a * 0.2 * bent
+    chord = span * z / big                       # the straight line through its ends: a gain the base takes
+    return c.u, c.x + a * 0.2 * (bent - chord)
 
 
 def mode_zero(c: Ctx, a: float):       # a mode with an antiresonance above it (the sensor on another body)
