@@ -103,7 +103,7 @@ class Diagnosis:
     noise_holds: float | None = None
     #: The sensor noise the user gave (``sensor_noise``), where it is the floor: more than the record shows.
     noise_given: float | None = None
-    #: The reading's quantisation step (m), where coarser than its white noise: ``noise_white`` is then the
+    #: The reading's quantisation step (m), where not fine against its noise: ``noise_white`` is then the
     #: quantisation error with the noise, read by local fits (:mod:`~hyst_model.effects.quantised`).
     noise_step: float | None = None
 
@@ -255,8 +255,8 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     floor, reading = read_floor(t, u, y, white, sensor_noise, step=step)
     noise = floor.value
     if step > 0.0:
-        say(f"noise floor {fmt_len(white)}: the sensor reads in steps of {fmt_len(step)}, coarser than its white "
-            "noise (quantisation error and noise, read by local fits)", step=False)
+        say(f"noise floor {fmt_len(white)}: the sensor reads in steps of {fmt_len(step)} (quantisation error and "
+            "noise, read by local fits)", step=False)
     if floor.held is not None:
         say(f"noise floor {fmt_len(floor.held.rms)} from the record's {floor.held.holds} holds: the sensor noise is "
             f"not white ({floor.held.rms / white:.2g}× its white part)", step=False)

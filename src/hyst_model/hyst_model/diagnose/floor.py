@@ -3,7 +3,7 @@
 Four sources, one floor (m RMS):
 
 * the white part, from second differences (:func:`~hyst_model.effects.signals.record_floor`) — always; for a
-  reading quantised in steps coarser than its white noise, the quantisation error with the noise, read by local
+  reading quantised in steps not fine against its noise, the quantisation error with the noise, read by local
   fits (:mod:`~hyst_model.effects.quantised`: second differences misread it), and the step is said;
 * noise that is not white, read where the input is held still (:mod:`.colour`) — where it exceeds the white part
   by :data:`~.colour.MARGIN`; read on the record without the lines below, which it would otherwise count as
@@ -35,7 +35,7 @@ class Floor:
     held: HeldNoise | None = None      # read in the holds, where above MARGIN × white
     lines: tuple[Line, ...] = ()       # found in the final residual, counted here
     given: float | None = None         # the user's sensor noise, whatever its size
-    step: float = 0.0                  # the reading's quantisation step where coarser than its noise, else 0
+    step: float = 0.0                  # the reading's quantisation step where not fine against its noise, else 0
 
     @property
     def measured(self) -> float:
@@ -64,8 +64,8 @@ class Floor:
                           "not drive" if self.lines else "")
         parts = []
         if self.step > 0.0 and self.held is None:
-            parts.append(f"the quantisation error of a sensor reading in steps of {fmt_len(self.step)} (coarser than "
-                         "its white noise), with that noise" + (f" ({fmt_len(self.white)})" if self.lines else ""))
+            parts.append(f"the quantisation error of a sensor reading in steps of {fmt_len(self.step)}, with its "
+                         "noise" + (f" ({fmt_len(self.white)})" if self.lines else ""))
         if self.held is not None:
             parts.append(f"noise read in the record's {self.held.holds} holds (the input still), "
                          f"{fmt_len(self.held.rms)}, {self.held.rms / self.white:.2g}× "

@@ -51,7 +51,7 @@ def findings(st) -> list[str]:
     noise = held if held else st.noise_sigma      # noise that is not white, where the holds show it
     q = st.extra.get("noise_step")
     if q:
-        out.append(f"The sensor reads in steps of {_um(q)}, coarser than its white noise: its quantisation error "
+        out.append(f"The sensor reads in steps of {_um(q)}: its quantisation error "
                    f"with the noise is {_um(st.noise_sigma)} RMS (read by local fits), which no model removes.")
     if held and white:
         out.append(f"The sensor noise read where the input is held still is {_um(held)}, "

@@ -219,7 +219,7 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
     sigma = noise_sigma(y)
     lattice = lattice_step(y)
     coarse, q = quantised_floor(y, e, lattice)
-    if q > 0.0:   # a reading coarser than its noise: differences misread its error (effects.quantised)
+    if q > 0.0:   # a reading in steps not fine against its noise: differences misread it (effects.quantised)
         sigma = coarse
     lines = disturbance_lines(t, u, e, sigma)
     if lines and lattice > 0.0:   # local fits read much of a line: the floor of the reading without them

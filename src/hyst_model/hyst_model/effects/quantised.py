@@ -1,4 +1,4 @@
-"""The noise floor of a reading quantised in steps coarser than its white noise (a digital sensor, a coarse ADC).
+"""The noise floor of a reading quantised in steps not fine against its noise (a digital sensor, a coarse ADC).
 
 Second differences (:func:`.signals.noise_floor`) read white noise, and quantisation error is white only while the
 noise before the quantiser dithers it: Widrow's condition, a white part σ of at least half the step q. Below it the
@@ -6,16 +6,18 @@ error is not white and the second differences misread it both ways: where the po
 reading flips by a step from sample to sample — an anti-correlated error the differences overstate (1.1–1.6× on
 generated records with q = 2–10 σ) — and where it creeps or holds it is a staircase whose differences are mostly
 exactly zero (the median absolute deviation then says 0 and the floor vanished, or its fallback read the steps of
-a step record: 636 nm for a 2.9 nm error). A model that is exact still leaves the quantisation error, so the floor
-is its RMS with the noise, read here by local fits instead:
+a step record: 636 nm for a 2.9 nm error). Above it the error is white, but the second differences of a reading on
+a lattice are whole steps, so the median they rest on moves in half steps: 0.7–1.3× the error for σ between 0.5 q
+and 2 q (a sim stage's 2 nm noise on 2 nm steps: 0.94–1.17×). A model that is exact still leaves the quantisation
+error, so the floor is its RMS with the noise, read here by local fits instead:
 
 * :func:`lattice_step` finds the step: every change of the reading a whole multiple of the smallest one;
 * :func:`local_noise` fits a quadratic to each run of :data:`WINDOW` samples and takes the median of the
   residual variances (corrected for the median's bias): the error's variance whatever its correlation over a
   sample or two, while the position's smooth course stays in the fit;
-* :func:`quantised_floor` uses them where the reading is on a lattice whose step is coarse (σ < q/2, i.e. the
-  local reading below q/√3), and never below q/√12, the RMS of the quantisation error alone (a staircase the
-  local fits follow). Elsewhere it says so (step 0) and the second differences stand, bit for bit.
+* :func:`quantised_floor` uses them where the reading is on a lattice and its error is below :data:`COARSE`
+  steps, and never below q/√12, the RMS of the quantisation error alone (a staircase the local fits follow).
+  Elsewhere it says so (step 0) and the second differences stand, bit for bit.
 """
 from __future__ import annotations
 
@@ -33,6 +35,12 @@ ON_LATTICE = 0.99
 TOLERANCE = 0.02
 #: The smallest change may be this many steps at most (a fast record whose reading never changes by one step).
 MAX_DIVISOR = 8
+#: Local fits read the floor of a reading on a lattice whose error is below this many steps. Second differences
+#: of a reading on a lattice are whole steps too, so the median absolute deviation they rest on moves in half
+#: steps — a floor that moves by 0.3 q: within 5 % only from an error of 3 q up (they misread 0.7–1.3× between
+#: 0.5 and 2 q, on a sim stage's 2 nm noise and 2 nm steps 0.94–1.17×). Local fits read it within a few % at every
+#: ratio.
+COARSE = 3.0
 
 
 def lattice_step(y: np.ndarray) -> float:
@@ -87,8 +95,8 @@ def quantised_floor(y: np.ndarray, e: np.ndarray | None = None, step: float | No
     is shorter than one run of :data:`WINDOW` samples.
 
     The floor is the smaller local reading of ``y`` and ``e`` (each only overstates: the position's course in
-    ``y``, the model's error in ``e``), at least q/√12. The step is coarse where that reading is below q/√3:
-    σ² + q²/12 < q²/3 is a white part σ below q/2 (Widrow). ``step``: the lattice's step when already known —
+    ``y``, the model's error in ``e``), at least q/√12. The step counts where that reading is below
+    :data:`COARSE` steps. ``step``: the lattice's step when already known —
     ``y`` may then be off it (the reading with lines the input does not drive taken out, whose power is not the
     sensor's noise)."""
     q = lattice_step(y) if step is None else float(step)
@@ -100,6 +108,6 @@ def quantised_floor(y: np.ndarray, e: np.ndarray | None = None, step: float | No
         if le > 0.0:
             reads.append(le)
     loc = min(reads)
-    if loc >= q / math.sqrt(3.0):
+    if loc >= COARSE * q:
         return 0.0, 0.0
     return max(loc, q / math.sqrt(12.0)), q
