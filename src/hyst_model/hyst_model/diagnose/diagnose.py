@@ -48,8 +48,8 @@ from hyst_common.blas import one_blas_thread
 
 from ..effects import effects_data_config
 from ..effects.settle import settle
-from ..effects.quantised import lattice_step, quantised_floor
-from ..effects.signals import record_floor, sample_time, fmt_len
+from ..effects.quantised import lattice_step
+from ..effects.signals import record_floor_step, sample_time, fmt_len
 from ..errors import DataError, FitError
 from .refit import (BLOCKS, MIN_TRAIN, MIN_VALID, SPLIT, Fixed, _Progress, _scales, _simulate, candidate_names,
                     default_fitter, guarded_refit, refit, rmse, validation_mask)
@@ -231,8 +231,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
     th_base = fit_(base_model, t, u, y, None)
     e_base = y - _simulate(base_model, th_base, t, u)
     lattice = lattice_step(y)              # a reading in coarse steps: the floor is local fits' (said)
-    noise = record_floor(y, e_base, lattice)
-    step = quantised_floor(y, e_base, lattice)[1]
+    noise, step = record_floor_step(y, e_base, lattice)
     # A line in the output the input does not drive (mains pickup, .lines) is the sensor's, not the stage's: it is
     # taken out of the record before any model sees it, and the base refitted from where it ended — a mode left
     # to it rings at the line and is named (generated stages without an effect: dynamics on 4 of 12 with pickup).
@@ -246,8 +245,7 @@ def diagnose(t, u, y, *, base: str = "mbw", effects: Sequence[str] | None = None
         th_base = fit_(base_model, t, u, y, th_base)
         e_base = y - _simulate(base_model, th_base, t, u)
         if lattice > 0.0:   # local fits read much of a line: the floor of the reading without them
-            white = record_floor(y, e_base, lattice)
-            step = quantised_floor(y, e_base, lattice)[1]
+            white, step = record_floor_step(y, e_base, lattice)
         say(f"took {lines_said(removed)} out of the output: the input does not drive "
             f"{'it' if len(removed) == 1 else 'them'} (mains pickup or an amplifier's ripple?)", step=False)
     # Noise that is not white (a sensor slower than the sampling) is read where the input is held still (.colour);

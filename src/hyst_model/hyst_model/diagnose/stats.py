@@ -42,7 +42,7 @@ import numpy as np
 
 from .correlation import Correlation, auto_lag_step, autocorr, crosscorr, higher_order_tests, z_value
 from ..effects.quantised import lattice_step, quantised_floor
-from ..effects.signals import record_floor
+from ..effects.signals import record_floor_step
 from .figures import Fit, _as_1d, fit_figures, noise_sigma
 from .floor import read_floor
 from .lines import disturbance_lines, without_lines
@@ -222,9 +222,12 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
     if q > 0.0:   # a reading in steps not fine against its noise: differences misread it (effects.quantised)
         sigma = coarse
     lines = disturbance_lines(t, u, e, sigma)
+    yc, ec = y, e
     if lines and lattice > 0.0:   # local fits read much of a line: the floor of the reading without them
-        coarse, q = quantised_floor(without_lines(t, y, lines), without_lines(t, e, lines), lattice)
-        sigma = coarse if q > 0.0 else sigma
+        yc, ec = without_lines(t, y, lines), without_lines(t, e, lines)
+    white, q = record_floor_step(yc, ec, lattice)   # as hyst diagnose judges it
+    if q > 0.0:
+        sigma = white
     return CompareStats(
         fs=fs, noise_sigma=sigma, overall=fit_figures(y, yhat),
         segments=fit_by_segment(t, u, y, yhat, **(segment_kw or {})),
@@ -234,19 +237,14 @@ def compare_stats(t: np.ndarray, u: np.ndarray, y: np.ndarray, yhat: np.ndarray,
         higher=higher_order_tests(e, u, max_lag, step, conf, dt), lag_step=step,
         extra={"loop_orientation": loop_orientation(u, y), "harmonics": _harmonic_summary(t, u, e),
                "ringing": _ringing_summary(t, u, e, sigma), "peaks": _peak_summary(t, u, e, fs),
-               "disturbances": [ln.to_json() for ln in lines], **_held(t, u, y, e, lines)})
+               "disturbances": [ln.to_json() for ln in lines], **_held(t, u, y, white, q, lines)})
 
 
-def _held(t: np.ndarray, u: np.ndarray, y: np.ndarray, e: np.ndarray, lines: list) -> dict[str, float | None]:
+def _held(t: np.ndarray, u: np.ndarray, y: np.ndarray, white: float, step: float,
+          lines: list) -> dict[str, float | None]:
     """``noise_holds``: the output noise read in the record's holds without the residual's lines (:mod:`.colour`),
-    where it exceeds the white part ``noise_white`` (as ``hyst diagnose`` judges it: ``record_floor``) by the
-    margin — noise that is not white —, else None."""
-    lattice = lattice_step(y)
-    yc, ec = y, e
-    if lines and lattice > 0.0:   # as diagnose: the floor of the reading without the lines
-        yc, ec = without_lines(t, y, lines), without_lines(t, e, lines)
-    white = record_floor(yc, ec, lattice)
-    step = quantised_floor(yc, ec, lattice)[1]
+    where it exceeds the white part ``white`` (as ``hyst diagnose`` judges it: ``record_floor_step``, read on the
+    lattice ``step`` if any) by the margin — noise that is not white —, else None."""
     floor, _ = read_floor(t, u, y, white, lines=lines, step=step)   # it reads the holds without the lines
     return {"noise_holds": floor.held.rms if floor.held is not None else None, "noise_white": white,
             "noise_step": step if step > 0.0 else None}

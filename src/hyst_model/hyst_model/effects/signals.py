@@ -5,7 +5,8 @@ import numpy as np
 
 from .quantised import quantised_floor
 
-__all__ = ["sample_time", "holds", "noise_floor", "smooth", "rate_of", "midrange", "corr", "fmt_len"]
+__all__ = ["sample_time", "holds", "noise_floor", "record_floor", "record_floor_step", "smooth", "rate_of", "midrange",
+           "corr", "fmt_len"]
 
 
 _LAST_T: list = [None]  # one (time vector, its fingerprint, period) tuple; the vector kept alive keeps its id
@@ -88,11 +89,16 @@ def record_floor(y: np.ndarray, e: np.ndarray, step: float | None = None) -> flo
     lattice coarser than its white noise has the floor of :func:`.quantised.quantised_floor` instead (``step``:
     that lattice's, when known from the record as read and ``y`` is the record with lines taken out).
     """
+    return record_floor_step(y, e, step)[0]
+
+
+def record_floor_step(y: np.ndarray, e: np.ndarray, step: float | None = None) -> tuple[float, float]:
+    """:func:`record_floor` and the lattice step it was read on (0.0 where second differences read it)."""
     coarse, q = quantised_floor(y, e, step)
     if q > 0.0:
-        return coarse
+        return coarse, q
     floor_y, floor_e = noise_floor(y), noise_floor(e)
-    return min(floor_y, floor_e) if floor_e > 0 else floor_y
+    return (min(floor_y, floor_e) if floor_e > 0 else floor_y), 0.0
 
 
 def smooth(x: np.ndarray, n: int) -> np.ndarray:
