@@ -227,11 +227,14 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--forms", choices=("own", "alt"), default=None,
                     help="the library effects' physical forms: the benchmark's own (default) or other laws of the "
                          "same physics (hyst_sim.generator.forms_alt)")
+    ap.add_argument("--excitations", choices=("own", "alt"), default=None,
+                    help="the excitations: the benchmark's own (default) or other identification schedules over all "
+                         "or part of the range (hyst_sim.generator.excitation_alt)")
     a = ap.parse_args(["--n", "24"] if argv is None else argv)
     kw = {k: v for k, v in (("min_factor", a.min_factor), ("noise_margin", a.noise_margin)) if v is not None}
     from hyst_sim.generator.cases import FAMILY_WEIGHTS, family_kinds  # the generator's own family order
     gen = {k: v for k, v in (("rate", a.rate), ("duration", a.duration), ("shapes", a.shapes), ("sensor", a.sensor),
-                             ("effect_forms", a.forms)) if v is not None}
+                             ("effect_forms", a.forms), ("excitations", a.excitations)) if v is not None}
     jobs = [(a.seed * 100000 + i, k, kw, gen) for i, k in enumerate(family_kinds(a.n))]
     if a.kinds:
         wanted = set(a.kinds.split(","))

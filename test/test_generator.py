@@ -146,3 +146,46 @@ def test_alternative_forms_families_are_labelled_and_the_own_family_is_unchanged
     assert np.array_equal(own.y, default.y) and own.forms == default.forms
     with pytest.raises(ValueError, match="effect_forms"):
         generate_case(seed, kind, effect_forms="other")
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_alternative_excitations_stay_in_range_cover_the_same_part_fresh_and_leave_the_own_family_unchanged(seed):
+    from hyst_common.profiles import GMA, PEA
+    from hyst_sim.generator.cases import family_kinds
+    from hyst_sim.generator.excitation_alt import ALT_EXCITATIONS
+    kind = family_kinds(12)[seed]
+    a = generate_case(seed, kind, excitations="alt")
+    assert a.excitation in ALT_EXCITATIONS
+    prof = PEA if a.u.min() >= 0 else GMA
+    assert prof.v_min <= a.u.min() and a.u.max() <= prof.v_max
+    assert np.all(np.isfinite(a.y)) and np.all(np.isfinite(a.y_fresh))
+    assert not np.array_equal(a.u, a.u_fresh)                         # a new realisation ...
+    after = a.t >= 0.2                                                 # ... over the same part of the range
+    lo, hi = np.percentile(a.u[after], [1, 99])
+    lo_f, hi_f = np.percentile(a.u_fresh[after], [1, 99])
+    span = prof.v_max - prof.v_min
+    assert abs(lo - lo_f) < 0.25 * span and abs(hi - hi_f) < 0.25 * span
+    own, default = generate_case(seed, kind, excitations="own"), generate_case(seed, kind)
+    assert np.array_equal(own.u, default.u) and np.array_equal(own.y, default.y)
+    with pytest.raises(ValueError, match="excitations"):
+        generate_case(seed, kind, excitations="other")
+
+
+@pytest.mark.parametrize("name", ["decay", "staircase", "trapezoid", "multisine", "bursts"])
+def test_each_alternative_excitation_has_its_shape(name):
+    from hyst_sim.generator.excitation_alt import excitation_alt
+    t = np.arange(16000) / 2000.0
+    u = excitation_alt(name, t, 0.0, 150.0, np.random.default_rng(3), np.random.default_rng(4))
+    assert u.min() >= 0.0 and u.max() <= 150.0 and np.ptp(u[t > 0.2]) > 0.1 * 150.0
+    du = np.abs(np.diff(u[t > 0.25]))
+    still = np.mean(du < 1e-12)
+    if name == "staircase":        # holds between jumps, up and down
+        assert still > 0.95 and np.sum(du > 1.0) >= 8
+    elif name == "trapezoid":      # ramps and holds, no jumps
+        assert 0.1 < still < 0.9 and du.max() < 150.0 * 0.5e-3 / 0.05 * 2.1
+    elif name == "bursts":         # rests at one level between bursts
+        assert still > 0.1 and du.max() < 0.1 * 150.0
+    else:                          # always moving
+        assert still < 0.01
+    with pytest.raises(ValueError, match="excitation kind"):
+        excitation_alt("square", t, 0.0, 150.0, np.random.default_rng(3), np.random.default_rng(4))

@@ -10,6 +10,7 @@ from hyst_common.profiles import GMA, PEA, get_profile
 from hyst_model.core import MBWParams, stage_model
 
 from .excitation import EXCITATIONS, excitation
+from .excitation_alt import ALT_EXCITATIONS, excitation_alt
 from .forms import FORMS, LIBRARY_NAME, Ctx, draw
 from .forms_alt import ALT_FORMS, ALT_LIBRARY_NAME, draw_alt
 
@@ -64,6 +65,8 @@ SHAPES = ("thesis", "wide")
 SENSORS = ("white", "hum", "coloured", "quantised")
 #: The library effects' physical forms: the benchmark's own (:mod:`.forms`) or other laws (:mod:`.forms_alt`).
 EFFECT_FORMS = ("own", "alt")
+#: The excitations drawn: the benchmark's own (:mod:`.excitation`) or other schedules (:mod:`.excitation_alt`).
+EXCITATION_SETS = ("own", "alt")
 _ALL_FORMS = {**FORMS, **ALT_FORMS}
 _NAME = {**LIBRARY_NAME, **ALT_LIBRARY_NAME}
 
@@ -183,7 +186,8 @@ def _calibrate(name: str, ctx: Ctx, draws: dict[str, dict], target: float) -> tu
 
 
 def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, duration: float = DURATION,
-                  shapes: str = "thesis", sensor: str = "white", effect_forms: str = "own") -> Case:
+                  shapes: str = "thesis", sensor: str = "white", effect_forms: str = "own",
+                  excitations: str = "own") -> Case:
     """One case, fully determined by ``seed`` (and ``kind``; drawn from :data:`KINDS` if omitted).
 
     ``rate`` (Hz) and ``duration`` (s) set the record's sampling; the defaults are the benchmark's own family, and
@@ -194,7 +198,12 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
     ``effect_forms`` (:data:`EFFECT_FORMS`): the library effects' physical forms — the benchmark's own
     (:mod:`.forms`) or other laws of the same physics (:mod:`.forms_alt`); effects outside the library and the
     cases without an effect are drawn alike.
+    ``excitations`` (:data:`EXCITATION_SETS`): the excitations — the benchmark's own, or other identification
+    schedules (:mod:`.excitation_alt`: decaying sines, staircases, trapezoids, multisines, bursts, over all or
+    part of the range); a fresh record is always a new realisation over the same part of the range.
     """
+    if excitations not in EXCITATION_SETS:
+        raise ValueError(f"excitations must be one of {', '.join(EXCITATION_SETS)}, not {excitations!r}")
     if effect_forms not in EFFECT_FORMS:
         raise ValueError(f"effect_forms must be one of {', '.join(EFFECT_FORMS)}, not {effect_forms!r}")
     if shapes not in SHAPES:
@@ -208,7 +217,7 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
     kind = kind or str(rng.choice(KINDS))
     truth = "pi" if kind == "pi_truth" else str(rng.choice(["pea", "gma"]))
     prof = GMA if truth == "gma" else (PEA if truth == "pea" else (PEA if rng.random() < 0.5 else GMA))
-    exc = str(rng.choice(EXCITATIONS))
+    exc = str(rng.choice(EXCITATIONS if excitations == "own" else ALT_EXCITATIONS))
     t = np.arange(int(round(duration * rate))) / rate
     if truth == "pi":
         simulate = _pi_simulator(prof.v_min, prof.v_max, prof.stroke, rng)
@@ -234,7 +243,10 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
 
     def record(u_seed: int, noise_seed: int):
         r2 = np.random.default_rng(u_seed)
-        u = excitation(exc, t, prof.v_min, prof.v_max, r2)
+        if excitations == "own":
+            u = excitation(exc, t, prof.v_min, prof.v_max, r2)
+        else:  # the part of the range from the case's first seed: a fresh record covers the same part
+            u = excitation_alt(exc, t, prof.v_min, prof.v_max, r2, np.random.default_rng([int(seeds[0]), 1]))
         x = simulate(u)
         ctx = Ctx(t, u, simulate, x, prof.stroke, {})
         return u, x, ctx, np.random.default_rng(noise_seed)
@@ -249,7 +261,7 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
     ua, y = _apply(strengths, ctx, draws)
     y = _read(sensor, seed, t, y, nrng.standard_normal(t.size), noise, 0)
     # fresh record of the same stage: new noise; random excitations get a new realisation too
-    fresh_u_seed = int(seeds[0]) if exc in ("triangles", "sweep") else int(seeds[2])
+    fresh_u_seed = int(seeds[0]) if excitations == "own" and exc in ("triangles", "sweep") else int(seeds[2])
     uf, xf, ctxf, nrng_f = record(fresh_u_seed, int(seeds[2]) + 1)
     _, yf = _apply(strengths, ctxf, draws)
     yf = _read(sensor, seed, t, yf, nrng_f.standard_normal(t.size), noise, 1)
@@ -264,10 +276,11 @@ def generate_case(seed: int, kind: str | None = None, *, rate: float = RATE, dur
 
 
 def case_family(n: int, seed: int = 0, *, rate: float = RATE, duration: float = DURATION,
-                shapes: str = "thesis", sensor: str = "white", effect_forms: str = "own") -> list[Case]:
+                shapes: str = "thesis", sensor: str = "white", effect_forms: str = "own",
+                excitations: str = "own") -> list[Case]:
     """``n`` cases with a balanced mix of :data:`KINDS` (singles weighted up), seeds ``seed*100000 + i``."""
     return [generate_case(seed * 100000 + i, k, rate=rate, duration=duration, shapes=shapes, sensor=sensor,
-                          effect_forms=effect_forms) for i, k in enumerate(family_kinds(n))]
+                          effect_forms=effect_forms, excitations=excitations) for i, k in enumerate(family_kinds(n))]
 
 
 #: How often each kind comes in a family (singles weighted up), in the order they cycle.
