@@ -126,6 +126,29 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
         lo, hi = m.bounds
         th0 = np.clip(th0, lo, hi)
         th0 = _start_on_carried(m, base_model, cfg, t, u, y, th0, carry)
+    th = _two_stage(m, base_model, t, u, y, th0, fitter, two_stage)
+    if two_stage:
+        # Effects a base fitted without them can absorb offer a start read from the record alone (drift:
+        # Effect.record_start); the refit from each is kept if it trains better (a multi-start of the same fit).
+        scored = ~validation_mask(np.asarray(t).size, np.asarray(u, dtype=np.float64))
+        carried = {k.split(".")[0] for k in (carry or {}) if "." in k}
+        others = m.record_starts(t, u, y, th0, scored, skip=tuple(carried))
+        if others:
+            best = _train_rmse(m, th, t, u, y, scored)
+            for th_alt in others:
+                try:
+                    th2 = _two_stage(m, base_model, t, u, y, th_alt, fitter, two_stage)
+                except (FitError, EffectError):
+                    continue  # the first start's fit stands
+                c2 = _train_rmse(m, th2, t, u, y, scored)
+                if c2 < best:
+                    th, best = th2, c2
+    return m, th, _simulate(m, th, t, u)
+
+
+def _two_stage(m: ComposedModel, base_model: Model, t, u, y, th0: np.ndarray, fitter, two_stage: bool
+               ) -> np.ndarray:
+    """Steps 2 and 3 of :func:`refit` from the start ``th0``."""
     th1 = th0
     uu, yy = around_effects(m, th0, t, u, y) if two_stage else (u, y)
     if uu is not u or yy is not y:
@@ -133,8 +156,15 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
         # output, with the base model's own fast fitter (equation-error starts, exact Jacobian).
         th1 = th0.copy()
         th1[: len(base_model.names)] = fitter(base_model, t, uu, yy, None)
-    th = fitter(m, t, u, y, th1)
-    return m, th, _simulate(m, th, t, u)
+    return fitter(m, t, u, y, th1)
+
+
+def _train_rmse(m: Model, th: np.ndarray, t, u, y, scored: np.ndarray) -> float:
+    """Training RMSE of ``m`` at ``th`` (inf where it diverges)."""
+    try:
+        return rmse((np.asarray(y) - _simulate(m, th, t, u))[scored])
+    except FitError:
+        return float("inf")
 
 
 def _start_on_carried(m: ComposedModel, base_model: Model, cfg: dict, t, u, y, th0: np.ndarray, carry: dict

@@ -20,8 +20,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from numba import njit
 
+from ..effects.operators import plays
 from ..effects.signals import fmt_len
 
 __all__ = ["UNEXPLAINED_FACTOR", "Unexplained", "loop_shape_share", "operator_share", "explain_unexplained",
@@ -111,19 +111,6 @@ def _explained_share(actual: np.ndarray, pred: np.ndarray) -> float:
     return float(np.clip(1.0 - np.mean((et - pred) ** 2) / power, 0.0, 1.0))
 
 
-@njit(cache=True, nogil=True)
-def _plays(u: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Play (backlash) operators of ``u`` for each radius, each starting at ``u[0]``: z ← min(max(z, u − r), u + r)."""
-    n, m = u.shape[0], radii.shape[0]
-    out = np.empty((n, m))
-    z = np.full(m, u[0])
-    for k in range(n):
-        for j in range(m):
-            z[j] = min(max(z[j], u[k] - radii[j]), u[k] + radii[j])
-            out[k, j] = z[j]
-    return out
-
-
 def operator_share(u: np.ndarray, e: np.ndarray, yhat: np.ndarray, idx: np.ndarray, train: np.ndarray) -> float:
     """Share of the residual on ``idx[~train]`` predicted by a Prandtl–Ishlinskii operator of the input plus a
     rescaling of the model's output, fitted on ``idx[train]``.
@@ -152,7 +139,7 @@ def operator_share(u: np.ndarray, e: np.ndarray, yhat: np.ndarray, idx: np.ndarr
     if span <= 0 or train.sum() < 8 * PLAY_RADII.size or test.sum() < 8 * PLAY_RADII.size:
         return 0.0
     un = (u - u.min()) / span
-    F = np.column_stack([_plays(un, PLAY_RADII), un * un, np.asarray(yhat, dtype=np.float64)])[idx]
+    F = np.column_stack([plays(un, PLAY_RADII), un * un, np.asarray(yhat, dtype=np.float64)])[idx]
     ev = np.asarray(e, dtype=np.float64)[idx]
     A, b = F[train], ev[train]
     mu, sd = A.mean(axis=0), A.std(axis=0)

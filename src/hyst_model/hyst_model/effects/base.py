@@ -202,6 +202,16 @@ class Effect:
         """Initial values (local names) from the data and the base model's residual ``y - y_base``."""
         return {}
 
+    def record_start(self, t: np.ndarray, u: np.ndarray, y: np.ndarray, scored: np.ndarray
+                     ) -> dict[str, float] | None:
+        """A second start read from the record alone, not from a fitted base's residual, or None (the default).
+
+        For an effect that a base fitted without it can absorb, so that its residual no longer shows it: refits
+        then also start from here (:meth:`ComposedModel.record_starts`) and keep whichever trains better.
+        ``scored``: the samples the fit scores.
+        """
+        return None
+
     def signature(self, t: np.ndarray, u: np.ndarray, residual: np.ndarray, dt: float) -> tuple[float, str]:
         """How much the residual looks like this effect: ``(score in [0, 1], evidence sentence)``."""
         return 0.0, "no residual test"
@@ -363,6 +373,26 @@ class ComposedModel(Model):
                 if k in local and np.isfinite(v):
                     theta[s.start + local.index(k)] = v
         return np.clip(theta, lo, hi)
+
+    def record_starts(self, t: np.ndarray, u: np.ndarray, y: np.ndarray, theta: np.ndarray, scored: np.ndarray,
+                      skip: Sequence[str] = ()) -> list[np.ndarray]:
+        """Other start vectors: ``theta`` with one effect's values replaced by its :meth:`Effect.record_start`
+        (one vector per effect that has one, those named in ``skip`` left out), clipped to bounds."""
+        lo, hi = self.bounds
+        out = []
+        for e, s in zip(self.effects, self._slices):
+            if e.name in skip:
+                continue
+            guess = e.record_start(t, u, y, scored)
+            if not guess:
+                continue
+            th = np.array(theta, dtype=np.float64)
+            local = [p.name for p in e.params()]
+            for k, v in guess.items():
+                if k in local and np.isfinite(v):
+                    th[s.start + local.index(k)] = v
+            out.append(np.clip(th, lo, hi))
+        return out
 
 
 class _StageMemo:
