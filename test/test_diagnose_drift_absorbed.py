@@ -85,3 +85,14 @@ def test_no_record_start_where_the_record_shows_no_drift(case):
     comp = case.forms[0][1] * 0.05 * GMA.stroke * (case.t - case.t[0]) / (case.t[-1] - case.t[0])
     assert d.record_start(case.t, case.u, case.y, scored) is not None
     assert d.record_start(case.t, case.u, case.y - comp, scored) is None     # the same stage without its drift
+
+
+def test_an_effect_whose_record_start_fails_leaves_the_refit_from_its_own_start(case, monkeypatch):
+    cfg, bm, th_b = _base(case)
+
+    def broken(self, t, u, y, scored):
+        raise np.linalg.LinAlgError("singular")
+    monkeypatch.setattr(Drift, "record_start", broken)
+    val = validation_mask(case.t.size, case.u)
+    _, th, yh = refit(bm, ["drift"], cfg, case.t, case.u, case.y, th_b)
+    assert np.all(np.isfinite(th)) and rmse((case.y - yh)[val]) > 5 * case.noise   # the residual start's basin

@@ -189,3 +189,14 @@ def test_each_alternative_excitation_has_its_shape(name):
         assert still < 0.01
     with pytest.raises(ValueError, match="excitation kind"):
         excitation_alt("square", t, 0.0, 150.0, np.random.default_rng(3), np.random.default_rng(4))
+
+
+@pytest.mark.parametrize("name", ["decay", "staircase", "trapezoid", "multisine", "bursts"])
+def test_alternative_excitations_end_on_a_coarse_sampling_and_refuse_a_record_too_short(name):
+    from hyst_sim.generator.excitation_alt import excitation_alt
+    t = np.arange(40) * 5.0                     # one sample every 5 s: holds and bursts shorter than a sample
+    u = excitation_alt(name, t, -5.0, 5.0, np.random.default_rng(1), np.random.default_rng(2))
+    assert u.shape == t.shape and np.all((-5.0 <= u) & (u <= 5.0))
+    for short in (np.arange(1) * 1e-3, np.arange(500) * 1e-3):
+        with pytest.raises(ValueError, match="at least 2 samples over at least 1 s"):
+            excitation_alt(name, short, -5.0, 5.0, np.random.default_rng(1), np.random.default_rng(2))

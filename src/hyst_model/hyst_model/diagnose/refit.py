@@ -101,10 +101,14 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
        parameters it does not provide come from ``prior`` (e.g. the screening level's fit: effect parameters are
        physical, so they carry across sample rates; base parameters do not) — overridden by ``carry`` (values of
        an earlier fit at this rate, e.g. the previous rung of the ladder);
-    2. for input-side effects (delay), the base refitted on the input as the effect transforms it at its start
-       (a base fitted without the effect is distorted by it — its δ terms imitate a delay — and a joint fit
-       from there stalls in that basin);
-    3. everything jointly from there.
+    2. for input-side effects (delay), the base refitted on the input as the effect transforms it at its start,
+       and for output-side effects that can be undone (an output delay, a drift: :meth:`Effect.undo_output`) on
+       the output without them (a base fitted without the effect is distorted by it — its δ terms imitate a
+       delay, or integrate a drift — and a joint fit from there stalls in that basin);
+    3. everything jointly from there;
+    4. with ``two_stage``, also steps 2–3 from each effect's start read off the record alone
+       (:meth:`Effect.record_start`: a drift the base absorbed, which its residual no longer shows), for effects
+       whose values are not carried; the fit that trains better is returned.
 
     With ``two_stage=False`` step 2 is skipped — for refits whose effect parameters are already good (carried
     from the screening level), where the joint fit alone converges and costs a fraction.
@@ -132,7 +136,10 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
         # Effect.record_start); the refit from each is kept if it trains better (a multi-start of the same fit).
         scored = ~validation_mask(np.asarray(t).size, np.asarray(u, dtype=np.float64))
         carried = {k.split(".")[0] for k in (carry or {}) if "." in k}
-        others = m.record_starts(t, u, y, th0, scored, skip=tuple(carried))
+        try:
+            others = m.record_starts(t, u, y, th0, scored, skip=tuple(carried))
+        except (EffectError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+            others = []  # an effect that cannot read its record start: the first start's fit stands
         if others:
             best = _train_rmse(m, th, t, u, y, scored)
             for th_alt in others:

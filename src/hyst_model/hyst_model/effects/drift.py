@@ -62,7 +62,7 @@ MAX_KNOTS = 100
 #: Play operators of the hysteresis the record start regresses on (radii evenly up to half the input's range).
 RECORD_PLAYS = 20
 
-#: The share a drift read from the record must cut that record's hysteresis error by (``hyst diagnose``'s own
+#: The factor a drift read from the record must cut that record's hysteresis error by (``hyst diagnose``'s own
 #: ``min_factor`` default: the standard an effect must meet against the model below it).
 RECORD_GAIN = 1.1
 

@@ -20,7 +20,7 @@ def _decay(t, rng):
     # restarts so the whole record excites; each decays to ~5 % (nested minor loops)
     out, k, dt = np.empty_like(t), 0, t[1] - t[0]
     while k < t.size:
-        n = int(rng.uniform(1.5, 4.0) / dt)
+        n = max(1, int(rng.uniform(1.5, 4.0) / dt))   # at least one sample: a coarse sampling still advances
         tt = np.arange(min(n, t.size - k)) * dt
         f = rng.uniform(0.5, 8.0)
         out[k:k + tt.size] = np.exp(-3.0 * tt / (n * dt)) * np.sin(2 * np.pi * f * tt)
@@ -35,23 +35,21 @@ def _staircase(t, rng):
     out, k, i, dt = np.empty_like(t), 0, 0, t[1] - t[0]
     hold = rng.uniform(0.15, 0.6)
     while k < t.size:
-        n = int(hold * rng.uniform(0.8, 1.2) / dt)
+        n = max(1, int(hold * rng.uniform(0.8, 1.2) / dt))
         out[k:k + n] = seq[i % seq.size]
         k, i = k + n, i + 1
     return out
 
 
 def _trapezoid(t, rng):
-    dt, pts, k = t[1] - t[0], [], 0.0
-    level = 0.0
+    pts, k = [], 0.0
     while k < t[-1]:
         ramp, hold = rng.uniform(0.05, 0.8), rng.uniform(0.1, 0.8)
         nxt = rng.uniform(-1.0, 1.0)
         pts += [(k + ramp, nxt), (k + ramp + hold, nxt)]
-        k, level = k + ramp + hold, nxt
+        k += ramp + hold
     tp = np.r_[0.0, [p[0] for p in pts]]
     lv = np.r_[0.0, [p[1] for p in pts]]
-    del dt, level
     return np.interp(t, tp, lv)
 
 
@@ -67,8 +65,8 @@ def _bursts(t, rng):
     dt, out, k = t[1] - t[0], np.zeros_like(t), 0
     while k < t.size:
         f = rng.uniform(3.0, 30.0)
-        n = int(rng.integers(3, 12) / f / dt)
-        rest = int(rng.uniform(0.2, 1.0) / dt)
+        n = max(1, int(rng.integers(3, 12) / f / dt))
+        rest = max(1, int(rng.uniform(0.2, 1.0) / dt))
         tt = np.arange(min(n, t.size - k)) * dt
         out[k:k + tt.size] = rng.uniform(0.4, 1.0) * np.sin(2 * np.pi * f * tt)
         k += tt.size + rest
@@ -84,12 +82,16 @@ def excitation_alt(kind: str, t: np.ndarray, v_min: float, v_max: float, rng: np
     """Input voltage (V) of the given :data:`ALT_EXCITATIONS` kind over ``t`` within ``[v_min, v_max]``.
 
     The shape is built on −1..1 and mapped to ``centre ± half``: with probability ½ most of the range (centre 0.5,
-    half-width 0.3–0.45 of it), otherwise a part near one end or about the middle (centre 0.2–0.8, half-width
-    0.08 up to 0.05 short of the nearer end), both drawn from ``span_rng``. The first 0.2 s ramp in from the middle
-    of the range, as for the own excitations.
+    half-width 0.3–0.45 of it, so 0.6–0.9 of it wide), otherwise a part near one end or about the middle (centre
+    0.2–0.8, half-width 0.08 up to 0.05 short of the nearer end), both drawn from ``span_rng``. The first 0.2 s
+    ramp in from the middle of the range, as for the own excitations.
     """
     if kind not in _BUILD:
         raise ValueError(f"excitation kind must be one of {', '.join(ALT_EXCITATIONS)}, not {kind!r}")
+    t = np.asarray(t, dtype=np.float64)
+    if not (t.size >= 2 and t[-1] - t[0] >= 1.0):  # a multisine's lowest line and a staircase's holds need a second
+        raise ValueError(f"an excitation needs at least 2 samples over at least 1 s, not {t.size} samples over "
+                         f"{(t[-1] - t[0]) if t.size else 0.0:g} s")
     if span_rng.random() < 0.5:
         centre, half = 0.5, span_rng.uniform(0.3, 0.45)
     else:
