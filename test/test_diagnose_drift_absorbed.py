@@ -96,3 +96,17 @@ def test_an_effect_whose_record_start_fails_leaves_the_refit_from_its_own_start(
     val = validation_mask(case.t.size, case.u)
     _, th, yh = refit(bm, ["drift"], cfg, case.t, case.u, case.y, th_b)
     assert np.all(np.isfinite(th)) and rmse((case.y - yh)[val]) > 5 * case.noise   # the residual start's basin
+
+
+def test_hyst_fits_fast_method_starts_from_the_record_start_too(case, monkeypatch):
+    from hyst_model import identify
+    val = validation_mask(case.t.size, case.u)
+    cfg = dict(_scales(case.u, case.y), dt=case.t[1] - case.t[0])
+
+    def fitted_rmse() -> float:
+        m = build_model("mbw", ["drift"], cfg)
+        res = identify.fit(m, case.t, case.u, case.y, method="fast", split=val)
+        return rmse((case.y - m.simulate(res.theta, case.t, case.u))[val])
+    assert fitted_rmse() < 1.2 * case.noise                           # what hyst diagnose's refit reaches
+    monkeypatch.setattr(Drift, "record_start", lambda self, t, u, y, scored: None)
+    assert fitted_rmse() > 5 * case.noise

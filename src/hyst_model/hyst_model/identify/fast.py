@@ -131,7 +131,10 @@ class FastFit(Estimator):
         # stays put, while a data-driven start can cost more at first and still lead to the noise floor
         # (hidden saturation bag: 4.0 µm at its start vs 0.25 µm at the defaults, 2.1 nm vs 460 nm fitted).
         pair = [th_data, th_default] if c_data < c_def else [th_default, th_data]
-        return pair if not np.allclose(th_data, th_default) else pair[:1]
+        # and from each effect's start read off the record alone (a drift the base absorbed), as hyst diagnose's
+        # refits do (hyst_model.diagnose.refit.refit): the same fit from the same starts
+        return (pair if not np.allclose(th_data, th_default) else pair[:1]) + self._record_starts(
+            problem, cast(_Extended, model), base, best[0])
 
     #: Iterations every distinct start runs before the best :attr:`n_starts` are continued. The equation-error
     #: ranking (on a low-passed output, free-run cost of the raw solve) can put the global basin last: on a generated
@@ -183,12 +186,36 @@ class FastFit(Estimator):
     def _data_start(self, problem: TrainProblem, model: _Extended, base: MBWModel,
                     th_base: np.ndarray) -> np.ndarray:
         """Effects' data-driven start on the training data; where effects transform the input (delay) or can be
-        undone on the output (an output-side delay) the base is refitted on the input and output as it sees them
-        there (:func:`~hyst_model.effects.compose.around_effects`) — a base fitted without the effect imitates it
-        (its δ terms mimic a delay) and the joint fit stalls in that basin (the same steps as ``hyst diagnose``)."""
-        from ..effects.compose import around_effects  # late: effects import the models this module fits
+        undone on the output (an output-side delay, a drift) the base is refitted on the input and output as it
+        sees them there (:func:`~hyst_model.effects.compose.around_effects`) — a base fitted without the effect
+        imitates it (its δ terms mimic a delay) and the joint fit stalls in that basin (the same steps as
+        ``hyst diagnose``)."""
         with np.errstate(all="ignore"):
             th = np.asarray(model.start(problem.t, problem.u, problem.y_full, th_base), dtype=np.float64)
+        return self._around(problem, model, base, th)
+
+    def _record_starts(self, problem: TrainProblem, model: _Extended, base: MBWModel,
+                       th_base: np.ndarray) -> list[np.ndarray]:
+        """Starts from each effect's :meth:`~hyst_model.effects.base.Effect.record_start` (read off the record
+        alone, on the scored samples), the base refitted around each (:meth:`_around`); none where no effect has
+        one or reading it fails."""
+        from ..errors import EffectError
+        others = getattr(model, "record_starts", None)
+        if others is None:
+            return []
+        scored = np.zeros(problem.y_full.size, dtype=bool)
+        scored[problem.a:] = problem.keep if problem.keep is not None else True
+        try:
+            with np.errstate(all="ignore"):
+                th0 = np.asarray(model.start(problem.t, problem.u, problem.y_full, th_base), dtype=np.float64)
+            alts = others(problem.t, problem.u, problem.y_full, th0, scored)
+        except (EffectError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+            return []
+        return [self._around(problem, model, base, th) for th in alts]
+
+    def _around(self, problem: TrainProblem, model: _Extended, base: MBWModel, th: np.ndarray) -> np.ndarray:
+        """``th`` with its base refitted on the input and output the base sees at ``th``."""
+        from ..effects.compose import around_effects  # late: effects import the models this module fits
         uu, yy = around_effects(cast("ComposedModel", model), th, problem.t, problem.u, problem.y_full)
         if uu is not problem.u or yy is not problem.y_full:
             bp = problem.for_model(base)
