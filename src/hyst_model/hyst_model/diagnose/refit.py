@@ -102,13 +102,14 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
        physical, so they carry across sample rates; base parameters do not) — overridden by ``carry`` (values of
        an earlier fit at this rate, e.g. the previous rung of the ladder);
     2. for input-side effects (delay), the base refitted on the input as the effect transforms it at its start,
-       and for output-side effects that can be undone (an output delay, a drift: :meth:`Effect.undo_output`) on
-       the output without them (a base fitted without the effect is distorted by it — its δ terms imitate a
-       delay, or integrate a drift — and a joint fit from there stalls in that basin);
+       and for output-side effects that can be undone (an output delay: :meth:`Effect.undo_output`) on the output
+       without them (a base fitted without the effect is distorted by it — its δ terms imitate a delay — and a
+       joint fit from there stalls in that basin);
     3. everything jointly from there;
     4. with ``two_stage``, also steps 2–3 from each effect's start read off the record alone
-       (:meth:`Effect.record_start`: a drift the base absorbed, which its residual no longer shows), for effects
-       whose values are not carried; the fit that trains better is returned.
+       (:meth:`Effect.record_start`: a drift the base absorbed, which its residual no longer shows; the base
+       refitted on the output without it there), for effects whose values are not carried; the fit that trains
+       better is returned.
 
     With ``two_stage=False`` step 2 is skipped — for refits whose effect parameters are already good (carried
     from the screening level), where the joint fit alone converges and costs a fraction.
@@ -130,7 +131,7 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
         lo, hi = m.bounds
         th0 = np.clip(th0, lo, hi)
         th0 = _start_on_carried(m, base_model, cfg, t, u, y, th0, carry)
-    th = _two_stage(m, base_model, t, u, y, th0, fitter, two_stage)
+    th = _two_stage(m, base_model, t, u, y, th0, fitter, two_stage, False)
     if two_stage:
         # Effects a base fitted without them can absorb offer a start read from the record alone (drift:
         # Effect.record_start); the refit from each is kept if it trains better (a multi-start of the same fit).
@@ -144,7 +145,7 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
             best = _train_rmse(m, th, t, u, y, scored)
             for th_alt in others:
                 try:
-                    th2 = _two_stage(m, base_model, t, u, y, th_alt, fitter, two_stage)
+                    th2 = _two_stage(m, base_model, t, u, y, th_alt, fitter, two_stage, True)
                 except (FitError, EffectError):
                     continue  # the first start's fit stands
                 c2 = _train_rmse(m, th2, t, u, y, scored)
@@ -153,11 +154,11 @@ def refit(base_model: Model, names: Sequence[str], cfg: dict, t, u, y, theta_bas
     return m, th, _simulate(m, th, t, u)
 
 
-def _two_stage(m: ComposedModel, base_model: Model, t, u, y, th0: np.ndarray, fitter, two_stage: bool
-               ) -> np.ndarray:
-    """Steps 2 and 3 of :func:`refit` from the start ``th0``."""
+def _two_stage(m: ComposedModel, base_model: Model, t, u, y, th0: np.ndarray, fitter, two_stage: bool,
+               record: bool) -> np.ndarray:
+    """Steps 2 and 3 of :func:`refit` from the start ``th0`` (``record``: a record start, :func:`around_effects`)."""
     th1 = th0
-    uu, yy = around_effects(m, th0, t, u, y) if two_stage else (u, y)
+    uu, yy = around_effects(m, th0, t, u, y, record) if two_stage else (u, y)
     if uu is not u or yy is not y:
         # The base around the effects at their start: the base alone on the transformed input and the undone
         # output, with the base model's own fast fitter (equation-error starts, exact Jacobian).

@@ -152,6 +152,10 @@ class Effect:
         """Output-side effects: the measured output (m) given the inner model's output ``y``."""
         return y
 
+    #: Whether the fitters undo this output effect (:meth:`undo_output`) at its own, residual-read start too, or
+    #: only at a start read off the record alone (:meth:`record_start`; :func:`~.compose.around_effects`).
+    undo_at_own_start: ClassVar[bool] = True
+
     def undo_output(self, theta: np.ndarray, t: np.ndarray, u: np.ndarray, y: np.ndarray) -> np.ndarray | None:
         """Output-side effects: the inner model's output that gives the measured ``y``, where the effect can be
         undone on a record (a delay: the record advanced); None where it cannot (default). The fitters refit the

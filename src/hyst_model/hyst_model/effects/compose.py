@@ -179,7 +179,8 @@ def effect_keys(name: str, settings_in: Mapping[str, object] | None = None
     return frozenset(settings), frozenset(params)
 
 
-def around_effects(m: ComposedModel, theta: np.ndarray, t, u, y) -> tuple[np.ndarray, np.ndarray]:
+def around_effects(m: ComposedModel, theta: np.ndarray, t, u, y, record: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """The input and output the base of ``m`` sees at ``theta``: ``u`` through the input-side effects, and ``y``
     with the outermost output-side effects undone as far as they can be (:meth:`Effect.undo_output`, outermost
     first, stopping at the first that cannot). The same objects when no effect changes them.
@@ -187,6 +188,11 @@ def around_effects(m: ComposedModel, theta: np.ndarray, t, u, y) -> tuple[np.nda
     A base fitted to the record as it is has imitated the effects (its δ terms lag like a delay on either side),
     and a joint fit from there stays in that basin: the fitters refit the base on these first
     (:func:`hyst_model.diagnose.refit.refit`, :meth:`hyst_model.identify.fast.FastFit._data_start`).
+
+    An effect whose start is read off the base's own residual but that the base absorbs (a drift:
+    :attr:`Effect.undo_at_own_start` False) is undone only at a start read off the record alone (``record``:
+    :meth:`Effect.record_start`): its residual start is what the base left, and refitting the base around it
+    only moves the base off the point it was fitted to.
     """
     parts = m.split(theta)[1]
     uu = u
@@ -199,7 +205,7 @@ def around_effects(m: ComposedModel, theta: np.ndarray, t, u, y) -> tuple[np.nda
             continue
         if e.kind != "output":
             break
-        back = e.undo_output(te, t, u, yy)
+        back = e.undo_output(te, t, u, yy) if record or e.undo_at_own_start else None
         if back is None:
             break
         yy = np.asarray(back, dtype=np.float64)

@@ -152,6 +152,11 @@ class Drift(Effect):
         c = coef[1:] - coef[0]
         return {f"c{j}": float(c[j - 1]) for j in range(1, self.knots + 1)}
 
+    #: Undone only at the record start: the residual start is what a base that absorbed the drift left of it, and
+    #: refitting the base around that moved it off the rung's point (generated PEA stage 3000102, creep and a kink:
+    #: the ladder ended at 1.52× the noise floor instead of 1.15×).
+    undo_at_own_start = False
+
     def undo_output(self, theta, t, u, y):
         """The reading without the drift at ``theta``: the base fitted on it is not bent towards the drift (see
         :meth:`record_start`)."""

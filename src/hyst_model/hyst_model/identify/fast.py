@@ -186,13 +186,13 @@ class FastFit(Estimator):
     def _data_start(self, problem: TrainProblem, model: _Extended, base: MBWModel,
                     th_base: np.ndarray) -> np.ndarray:
         """Effects' data-driven start on the training data; where effects transform the input (delay) or can be
-        undone on the output (an output-side delay, a drift) the base is refitted on the input and output as it
+        undone on the output (an output-side delay) the base is refitted on the input and output as it
         sees them there (:func:`~hyst_model.effects.compose.around_effects`) — a base fitted without the effect
         imitates it (its δ terms mimic a delay) and the joint fit stalls in that basin (the same steps as
         ``hyst diagnose``)."""
         with np.errstate(all="ignore"):
             th = np.asarray(model.start(problem.t, problem.u, problem.y_full, th_base), dtype=np.float64)
-        return self._around(problem, model, base, th)
+        return self._around(problem, model, base, th, False)
 
     def _record_starts(self, problem: TrainProblem, model: _Extended, base: MBWModel,
                        th_base: np.ndarray) -> list[np.ndarray]:
@@ -211,12 +211,14 @@ class FastFit(Estimator):
             alts = others(problem.t, problem.u, problem.y_full, th0, scored)
         except (EffectError, ValueError, ArithmeticError, np.linalg.LinAlgError):
             return []
-        return [self._around(problem, model, base, th) for th in alts]
+        return [self._around(problem, model, base, th, True) for th in alts]
 
-    def _around(self, problem: TrainProblem, model: _Extended, base: MBWModel, th: np.ndarray) -> np.ndarray:
-        """``th`` with its base refitted on the input and output the base sees at ``th``."""
+    def _around(self, problem: TrainProblem, model: _Extended, base: MBWModel, th: np.ndarray,
+                record: bool) -> np.ndarray:
+        """``th`` with its base refitted on the input and output the base sees at ``th`` (``record``: a record
+        start, :func:`~hyst_model.effects.compose.around_effects`)."""
         from ..effects.compose import around_effects  # late: effects import the models this module fits
-        uu, yy = around_effects(cast("ComposedModel", model), th, problem.t, problem.u, problem.y_full)
+        uu, yy = around_effects(cast("ComposedModel", model), th, problem.t, problem.u, problem.y_full, record)
         if uu is not problem.u or yy is not problem.y_full:
             bp = problem.for_model(base)
             bp.u = np.asarray(uu, dtype=np.float64)
