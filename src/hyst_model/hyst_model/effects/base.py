@@ -371,11 +371,7 @@ class ComposedModel(Model):
         residual = y - self.base.simulate(theta_base, t, u)
         lo, hi = self.bounds
         for e, s in zip(self.effects, self._slices):
-            guess = e.start(t, u, y, residual) or {}
-            local = [p.name for p in e.params()]
-            for k, v in guess.items():
-                if k in local and np.isfinite(v):
-                    theta[s.start + local.index(k)] = v
+            _place(theta, e, s, e.start(t, u, y, residual) or {})
         return np.clip(theta, lo, hi)
 
     def record_starts(self, t: np.ndarray, u: np.ndarray, y: np.ndarray, theta: np.ndarray, scored: np.ndarray,
@@ -391,12 +387,17 @@ class ComposedModel(Model):
             if not guess:
                 continue
             th = np.array(theta, dtype=np.float64)
-            local = [p.name for p in e.params()]
-            for k, v in guess.items():
-                if k in local and np.isfinite(v):
-                    th[s.start + local.index(k)] = v
+            _place(th, e, s, guess)
             out.append(np.clip(th, lo, hi))
         return out
+
+
+def _place(theta: np.ndarray, e: Effect, s: slice, values: Mapping[str, float]) -> None:
+    """Write ``e``'s finite local ``values`` into its slice ``s`` of the packed ``theta`` (others ignored)."""
+    local = [p.name for p in e.params()]
+    for k, v in values.items():
+        if k in local and np.isfinite(v):
+            theta[s.start + local.index(k)] = v
 
 
 class _StageMemo:

@@ -187,7 +187,7 @@ def around_effects(m: ComposedModel, theta: np.ndarray, t, u, y, record: bool = 
 
     A base fitted to the record as it is has imitated the effects (its δ terms lag like a delay on either side),
     and a joint fit from there stays in that basin: the fitters refit the base on these first
-    (:func:`hyst_model.diagnose.refit.refit`, :meth:`hyst_model.identify.fast.FastFit._data_start`).
+    (:func:`hyst_model.diagnose.refit.refit`, :meth:`hyst_model.identify.fast.FastFit._around`).
 
     An effect whose start is read off the base's own residual but that the base absorbs (a drift:
     :attr:`Effect.undo_at_own_start` False) is undone only at a start read off the record alone (``record``:

@@ -123,7 +123,9 @@ class FastFit(Estimator):
         if not hasattr(model, "start"):
             return [th_default]
         # a model with a base and a data-driven start: a composed model (hyst_model.effects.ComposedModel)
-        th_data = self._data_start(problem, cast(_Extended, model), base, best[0])
+        ext = cast(_Extended, model)
+        th_start = self._data_start(problem, ext, base, best[0])
+        th_data = self._around(problem, ext, base, th_start, False)
         c_def, c_data = problem.cost(th_default), problem.cost(th_data)
         self._say(f"fast: effects at their defaults -> {c_def:.4g} m, at their data-driven start -> {c_data:.4g} m")
         # Both are run (briefly, the better one then continued): at their defaults most effects are the identity,
@@ -134,7 +136,7 @@ class FastFit(Estimator):
         # and from each effect's start read off the record alone (a drift the base absorbed), as hyst diagnose's
         # refits do (hyst_model.diagnose.refit.refit): the same fit from the same starts
         return (pair if not np.allclose(th_data, th_default) else pair[:1]) + self._record_starts(
-            problem, cast(_Extended, model), base, best[0])
+            problem, ext, base, th_start)
 
     #: Iterations every distinct start runs before the best :attr:`n_starts` are continued. The equation-error
     #: ranking (on a low-passed output, free-run cost of the raw solve) can put the global basin last: on a generated
@@ -185,20 +187,16 @@ class FastFit(Estimator):
 
     def _data_start(self, problem: TrainProblem, model: _Extended, base: MBWModel,
                     th_base: np.ndarray) -> np.ndarray:
-        """Effects' data-driven start on the training data; where effects transform the input (delay) or can be
-        undone on the output (an output-side delay) the base is refitted on the input and output as it
-        sees them there (:func:`~hyst_model.effects.compose.around_effects`) — a base fitted without the effect
-        imitates it (its δ terms mimic a delay) and the joint fit stalls in that basin (the same steps as
-        ``hyst diagnose``)."""
+        """Effects' data-driven start on the training data, the base at ``th_base`` (not yet refitted around the
+        effects: :meth:`_around` — the same steps as ``hyst diagnose``)."""
         with np.errstate(all="ignore"):
-            th = np.asarray(model.start(problem.t, problem.u, problem.y_full, th_base), dtype=np.float64)
-        return self._around(problem, model, base, th, False)
+            return np.asarray(model.start(problem.t, problem.u, problem.y_full, th_base), dtype=np.float64)
 
     def _record_starts(self, problem: TrainProblem, model: _Extended, base: MBWModel,
-                       th_base: np.ndarray) -> list[np.ndarray]:
+                       th_start: np.ndarray) -> list[np.ndarray]:
         """Starts from each effect's :meth:`~hyst_model.effects.base.Effect.record_start` (read off the record
-        alone, on the scored samples), the base refitted around each (:meth:`_around`); none where no effect has
-        one or reading it fails."""
+        alone, on the scored samples) in place of its values in ``th_start`` (:meth:`_data_start`), the base
+        refitted around each (:meth:`_around`); none where no effect has one or reading it fails."""
         from ..errors import EffectError
         others = getattr(model, "record_starts", None)
         if others is None:
@@ -206,9 +204,7 @@ class FastFit(Estimator):
         scored = np.zeros(problem.y_full.size, dtype=bool)
         scored[problem.a:] = problem.keep if problem.keep is not None else True
         try:
-            with np.errstate(all="ignore"):
-                th0 = np.asarray(model.start(problem.t, problem.u, problem.y_full, th_base), dtype=np.float64)
-            alts = others(problem.t, problem.u, problem.y_full, th0, scored)
+            alts = others(problem.t, problem.u, problem.y_full, th_start, scored)
         except (EffectError, ValueError, ArithmeticError, np.linalg.LinAlgError):
             return []
         return [self._around(problem, model, base, th, True) for th in alts]
@@ -216,7 +212,9 @@ class FastFit(Estimator):
     def _around(self, problem: TrainProblem, model: _Extended, base: MBWModel, th: np.ndarray,
                 record: bool) -> np.ndarray:
         """``th`` with its base refitted on the input and output the base sees at ``th`` (``record``: a record
-        start, :func:`~hyst_model.effects.compose.around_effects`)."""
+        start, :func:`~hyst_model.effects.compose.around_effects`): where effects transform the input (delay) or can
+        be undone on the output (an output-side delay), a base fitted without the effect imitates it (its δ terms
+        mimic a delay) and the joint fit stalls in that basin."""
         from ..effects.compose import around_effects  # late: effects import the models this module fits
         uu, yy = around_effects(cast("ComposedModel", model), th, problem.t, problem.u, problem.y_full, record)
         if uu is not problem.u or yy is not problem.y_full:
